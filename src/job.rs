@@ -1,0 +1,307 @@
+//! The `relief` command as one library call: options in, files out.
+//! The binary only parses flags into `ReliefJob` and prints the summary.
+
+use crate::bail;
+use crate::error::Result;
+use crate::grid::Grid;
+use crate::output::{check_writable, Outputs};
+use crate::relief::gradient::{shape_field, Field, Shaping};
+use crate::relief::{self, file, Method, Params, Relief, Stencil};
+use crate::scene::image_input::{load_png, ImageModel};
+use crate::scene::{self, Camera};
+use crate::timing::Timings;
+use crate::{export, materials, preview};
+use std::path::PathBuf;
+
+/// Longest side accepted for `--resolution` (pixels).
+pub const MAX_RESOLUTION: usize = 16384;
+
+#[derive(Clone, Debug)]
+pub struct ReliefJob {
+    /// OBJ, STL, depth PNG or normal PNG; `None` = the built-in demo scene.
+    pub model: Option<PathBuf>,
+    pub camera: Camera,
+    pub resolution: usize,
+    /// Panel width in mm.
+    pub width_mm: f64,
+    /// Relief depth in mm; `None` = from the material, else 5 mm.
+    pub depth_mm: Option<f64>,
+    pub alpha: Option<f64>,
+    pub silhouette: f64,
+    pub steps_mm: Option<f64>,
+    pub flat_background: bool,
+    /// `None` = the material's bands (or none).
+    pub bands: Option<Vec<f64>>,
+    pub emphasize: Vec<(String, f64)>,
+    pub stencil: Option<PathBuf>,
+    pub stencil_gain: f64,
+    pub material: Option<String>,
+    pub mirror: bool,
+    pub invert: bool,
+    pub method: Method,
+    pub output: PathBuf,
+    pub stl: Option<PathBuf>,
+    pub base_mm: f64,
+    pub preview: Option<PathBuf>,
+    pub depth_out: Option<PathBuf>,
+}
+
+impl Default for ReliefJob {
+    fn default() -> Self {
+        ReliefJob {
+            model: None,
+            camera: Camera::default(),
+            resolution: 512,
+            width_mm: 100.0,
+            depth_mm: None,
+            alpha: None,
+            silhouette: 8.0,
+            steps_mm: None,
+            flat_background: false,
+            bands: None,
+            emphasize: Vec::new(),
+            stencil: None,
+            stencil_gain: 2.0,
+            material: None,
+            mirror: false,
+            invert: false,
+            method: Method::Gradient,
+            output: PathBuf::from("relief.png"),
+            stl: None,
+            base_mm: 2.0,
+            preview: None,
+            depth_out: None,
+        }
+    }
+}
+
+/// Default compression when neither flag nor material sets it.
+pub const DEFAULT_ALPHA: f64 = 4.0;
+/// Default depth (mm) without `--depth` or `--material`.
+pub const DEFAULT_DEPTH: f64 = 5.0;
+
+/// What a finished run reports.
+pub struct Summary {
+    pub relief: Relief,
+    pub params: Params,
+    pub timings: Timings,
+    pub silhouette_edges: usize,
+    pub written: Vec<PathBuf>,
+}
+
+impl ReliefJob {
+    /// Resolve material defaults into concrete relief parameters.
+    pub fn params(&self) -> Result<Params> {
+        let mat = self.material.as_deref().map(materials::find).transpose()?;
+        let depth = match (self.depth_mm, &mat) {
+            (Some(d), _) => d,
+            (None, Some(m)) => m.depth_per_100mm * self.width_mm / 100.0,
+            (None, None) => DEFAULT_DEPTH,
+        };
+        let p = Params {
+            depth_mm: depth,
+            width_mm: self.width_mm,
+            alpha: self
+                .alpha
+                .or(mat.as_ref().and_then(|m| m.alpha))
+                .unwrap_or(DEFAULT_ALPHA),
+            silhouette: self.silhouette,
+            steps_mm: self.steps_mm,
+            flat_background: self.flat_background,
+            bands: self
+                .bands
+                .clone()
+                .or(mat.map(|m| m.bands))
+                .unwrap_or_default(),
+            mirror: self.mirror,
+            invert: self.invert,
+            method: self.method,
+        };
+        p.validate()?;
+        Ok(p)
+    }
+
+    fn validate(&self) -> Result<Params> {
+        if self.resolution < 8 || self.resolution > MAX_RESOLUTION {
+            bail!(
+                "--resolution {}: must be between 8 and {MAX_RESOLUTION} pixels",
+                self.resolution
+            );
+        }
+        self.camera.validate()?;
+        if !self.base_mm.is_finite() || self.base_mm < 0.0 || self.base_mm > 10_000.0 {
+            bail!("--base {}: must be a thickness in mm >= 0", self.base_mm);
+        }
+        if !self.stencil_gain.is_finite() || self.stencil_gain < 0.0 {
+            bail!(
+                "--stencil-gain {}: must be a number >= 0",
+                self.stencil_gain
+            );
+        }
+        for (name, g) in &self.emphasize {
+            if !g.is_finite() || *g < 0.0 {
+                bail!("--emphasize {name}={g}: the gain must be a number >= 0");
+            }
+        }
+        if let Some(m) = &self.model {
+            if !m.exists() {
+                bail!("{}: no such file", m.display());
+            }
+        }
+        if let Some(s) = &self.stencil {
+            if !s.exists() {
+                bail!("{}: no such file (--stencil)", s.display());
+            }
+        }
+        let outs = [
+            Some(&self.output),
+            self.stl.as_ref(),
+            self.preview.as_ref(),
+            self.depth_out.as_ref(),
+        ];
+        for o in outs.into_iter().flatten() {
+            check_writable(o)?;
+        }
+        check_writable(&file::sidecar_path(&self.output))?;
+        self.params()
+    }
+
+    /// Load the model and make the shaped field.
+    fn field(&self, p: &Params, t: &mut Timings) -> Result<(Field, Vec<String>)> {
+        let shaping = Shaping {
+            alpha: p.alpha,
+            threshold: p.silhouette,
+        };
+        let is_png = self
+            .model
+            .as_ref()
+            .and_then(|m| m.extension())
+            .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+        if is_png {
+            let path = self.model.as_ref().unwrap();
+            let img = t.time("load", || load_png(path))?;
+            return Ok(t.time("gradients", || match &img {
+                ImageModel::Depth(d) => (shape_field(d, 1, shaping), d.objects.clone()),
+                ImageModel::Slopes(s) => (shape_field(s, 1, shaping), Vec::new()),
+            }));
+        }
+        let mesh = match &self.model {
+            Some(path) => t.time("load", || scene::mesh::load(path))?,
+            None => t.time("load", scene::demo::scene),
+        };
+        let dm = t.time("rasterize", || {
+            scene::render(&mesh, &self.camera, self.resolution, 2)
+        });
+        if dm.id.data.iter().all(|&i| i == 0) {
+            bail!("{}: nothing visible from this view", self.model_name());
+        }
+        let field = t.time("gradients", || shape_field(&dm, 2, shaping));
+        Ok((field, mesh.objects))
+    }
+
+    pub fn model_name(&self) -> String {
+        self.model
+            .as_ref()
+            .map(|m| m.display().to_string())
+            .unwrap_or_else(|| "demo scene".into())
+    }
+
+    fn stencils(&self, field: &Field, objects: &[String]) -> Result<Vec<Stencil>> {
+        let mut out = Vec::new();
+        for (name, gain) in &self.emphasize {
+            let Some(k) = objects.iter().position(|o| o == name) else {
+                bail!(
+                    "--emphasize {name}: {} has no object named '{name}'; objects: {}",
+                    self.model_name(),
+                    if objects.is_empty() {
+                        "none".into()
+                    } else {
+                        objects.join(", ")
+                    }
+                );
+            };
+            let id = k as u16 + 1;
+            let weight = field.id.map(|i| (*i == id) as u8 as f32);
+            out.push(Stencil {
+                name: name.clone(),
+                weight,
+                gain: *gain,
+            });
+        }
+        if let Some(path) = &self.stencil {
+            let g = file::read_gray(path)?;
+            let (w, h) = (field.gx.w, field.gx.h);
+            // nearest sample, so any mask size maps onto the relief
+            let mut weight = Grid::new(w, h, 0.0f32);
+            for y in 0..h {
+                for x in 0..w {
+                    weight.set(x, y, *g.get(x * g.w / w, y * g.h / h));
+                }
+            }
+            out.push(Stencil {
+                name: path.display().to_string(),
+                weight,
+                gain: self.stencil_gain,
+            });
+        }
+        Ok(out)
+    }
+
+    /// Run the whole job and write its outputs (all or nothing).
+    pub fn run(&self, stage: &mut dyn FnMut(&str)) -> Result<Summary> {
+        let params = self.validate()?;
+        let mut t = Timings::default();
+        stage("loading and rendering");
+        let (field, objects) = self.field(&params, &mut t)?;
+        let stencils = self.stencils(&field, &objects)?;
+        stage("integrating");
+        let relief = relief::build(&field, &params, &stencils, &mut t)?;
+        stage("writing");
+        let mut out = Outputs::default();
+        let meta = serde_json::json!({
+            "model": self.model_name(),
+            "camera": self.camera,
+            "resolution": self.resolution,
+            "material": self.material,
+            "relief": params,
+            "emphasize": self.emphasize,
+            "stencil": self.stencil.as_ref().map(|s| (s.display().to_string(), self.stencil_gain)),
+        });
+        t.time("encode", || -> Result<()> {
+            let (png, json) = file::encode_relief(&relief, meta);
+            out.add(&self.output, png);
+            out.add(&file::sidecar_path(&self.output), json);
+            if let Some(p) = &self.stl {
+                out.add(p, export::stl_bytes(&relief, self.base_mm));
+            }
+            if let Some(p) = &self.preview {
+                out.add(p, file::png8(&preview::shade(&relief)));
+            }
+            if let Some(p) = &self.depth_out {
+                let mut d = field
+                    .depth
+                    .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16);
+                if self.mirror {
+                    d.flip_x();
+                }
+                out.add(p, file::png16(&d));
+            }
+            Ok(())
+        })?;
+        let mut written = vec![self.output.clone(), file::sidecar_path(&self.output)];
+        written.extend(
+            [&self.stl, &self.preview, &self.depth_out]
+                .into_iter()
+                .flatten()
+                .cloned(),
+        );
+        t.time("write", || out.commit())?;
+        Ok(Summary {
+            relief,
+            params,
+            timings: t,
+            silhouette_edges: field.silhouette_edges,
+            written,
+        })
+    }
+}

@@ -1,0 +1,17 @@
+//! relievo: 3D scenes to bas-reliefs (Weyrich et al. 2007) and
+//! bas-reliefs to CNC jobs. Data flows one way:
+//! scene -> relief -> (toolpath -> gcode -> sim / grbl).
+
+pub mod error;
+pub mod export;
+pub mod grid;
+pub mod job;
+pub mod materials;
+pub mod output;
+pub mod preview;
+pub mod relief;
+pub mod scene;
+pub mod timing;
+
+pub use error::{Error, Result};
+pub use grid::Grid;

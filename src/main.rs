@@ -1,0 +1,217 @@
+//! The `relievo` binary: parses flags into the library's option structs,
+//! calls one library function per subcommand, prints errors once.
+
+use clap::{Args, Parser, Subcommand};
+use relievo::job::ReliefJob;
+use relievo::relief::Method;
+use relievo::scene::{Camera, View};
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "relievo",
+    version,
+    about = "3D scenes to bas-reliefs, bas-reliefs to GRBL CNC jobs"
+)]
+struct Cli {
+    /// Print nothing but errors.
+    #[arg(long, short, global = true)]
+    quiet: bool,
+    /// Print stage timings and details.
+    #[arg(long, short, global = true, alias = "timings")]
+    verbose: bool,
+    #[command(subcommand)]
+    cmd: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Make a bas-relief from a 3D model (OBJ, STL), a depth PNG or a
+    /// normal-map PNG; without MODEL, from the built-in demo scene.
+    Relief(ReliefArgs),
+}
+
+#[derive(Args)]
+struct ReliefArgs {
+    /// OBJ, STL (ASCII or binary), grayscale depth PNG (white = near) or RGB normal-map PNG.
+    model: Option<PathBuf>,
+    /// Output relief: 16-bit PNG; a JSON sidecar is written beside it.
+    #[arg(short, long, default_value = "relief.png")]
+    output: PathBuf,
+    /// View preset (where the eye is, seen from the model).
+    #[arg(long, value_enum, default_value_t = View::Front)]
+    view: View,
+    /// Extra turn about the vertical axis, degrees.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    yaw: f64,
+    /// Extra elevation of the eye, degrees.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pitch: f64,
+    /// Field of view in degrees; 0 = orthographic.
+    #[arg(long, default_value_t = 20.0)]
+    fov: f64,
+    /// Long side of the relief in pixels (meshes render at twice this).
+    #[arg(long, default_value_t = 512)]
+    resolution: usize,
+    /// Panel width in mm (the height follows the aspect).
+    #[arg(long, default_value_t = 100.0)]
+    width: f64,
+    /// Relief depth in mm [default: from --material, else 5].
+    #[arg(long)]
+    depth: Option<f64>,
+    /// Compression strength: C(x) = ln(1 + alpha x) / alpha [default: from --material, else 4].
+    #[arg(long)]
+    alpha: Option<f64>,
+    /// Silhouette threshold: a slope (scene depth per image width) above which an edge is an outline.
+    #[arg(long, default_value_t = 8.0)]
+    silhouette: f64,
+    /// Trace every outline with a constant step of this height (mm).
+    #[arg(long)]
+    steps: Option<f64>,
+    /// Hold the background flat at height 0 (Dirichlet) instead of free.
+    #[arg(long)]
+    flat_background: bool,
+    /// Feature-band gains, finest first, e.g. 2,1.5,1 [default: from --material].
+    #[arg(long, value_delimiter = ',')]
+    bands: Option<Vec<f64>>,
+    /// Scale one OBJ object's slopes: NAME=GAIN (repeatable).
+    #[arg(long, value_parser = parse_emphasis)]
+    emphasize: Vec<(String, f64)>,
+    /// Grayscale mask PNG for selective scaling (white = full gain).
+    #[arg(long)]
+    stencil: Option<PathBuf>,
+    /// Gain inside --stencil.
+    #[arg(long, default_value_t = 2.0)]
+    stencil_gain: f64,
+    /// Material preset: depth ratio, bands and compression (see machines/materials.toml).
+    #[arg(long)]
+    material: Option<String>,
+    /// Mirror left to right (for stamping dies).
+    #[arg(long)]
+    mirror: bool,
+    /// Hollow relief (for moulds).
+    #[arg(long)]
+    invert: bool,
+    /// gradient (Weyrich 2007) or linear (Cignoni 1997 baseline).
+    #[arg(long, value_enum, default_value_t = Method::Gradient)]
+    method: Method,
+    /// Also write the relief as a watertight binary STL solid.
+    #[arg(long)]
+    stl: Option<PathBuf>,
+    /// Base thickness under the relief in the STL, mm.
+    #[arg(long, default_value_t = 2.0)]
+    base: f64,
+    /// Also write a shaded preview PNG.
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// Also write the depth buffer (at relief resolution) as a 16-bit PNG.
+    #[arg(long)]
+    depth_out: Option<PathBuf>,
+}
+
+fn parse_emphasis(s: &str) -> Result<(String, f64), String> {
+    let (name, gain) = s
+        .split_once('=')
+        .ok_or_else(|| format!("'{s}': expected NAME=GAIN"))?;
+    let gain: f64 = gain
+        .parse()
+        .map_err(|_| format!("'{s}': GAIN must be a number"))?;
+    Ok((name.to_string(), gain))
+}
+
+impl ReliefArgs {
+    fn job(self) -> ReliefJob {
+        ReliefJob {
+            model: self.model,
+            camera: Camera {
+                view: self.view,
+                yaw: self.yaw,
+                pitch: self.pitch,
+                fov: self.fov,
+            },
+            resolution: self.resolution,
+            width_mm: self.width,
+            depth_mm: self.depth,
+            alpha: self.alpha,
+            silhouette: self.silhouette,
+            steps_mm: self.steps,
+            flat_background: self.flat_background,
+            bands: self.bands,
+            emphasize: self.emphasize,
+            stencil: self.stencil,
+            stencil_gain: self.stencil_gain,
+            material: self.material,
+            mirror: self.mirror,
+            invert: self.invert,
+            method: self.method,
+            output: self.output,
+            stl: self.stl,
+            base_mm: self.base,
+            preview: self.preview,
+            depth_out: self.depth_out,
+        }
+    }
+}
+
+/// A spinner on a terminal, nothing in pipes or with --quiet.
+fn spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
+    if quiet || !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let pb = indicatif::ProgressBar::new_spinner();
+    pb.enable_steady_tick(std::time::Duration::from_millis(100));
+    Some(pb)
+}
+
+fn run(cli: Cli) -> relievo::Result<()> {
+    match cli.cmd {
+        Cmd::Relief(args) => {
+            let job = args.job();
+            let pb = spinner(cli.quiet);
+            let mut stage = |s: &str| {
+                if let Some(pb) = &pb {
+                    pb.set_message(s.to_string());
+                }
+            };
+            let res = job.run(&mut stage);
+            if let Some(pb) = pb {
+                pb.finish_and_clear();
+            }
+            let s = res?;
+            if !cli.quiet {
+                let r = &s.relief;
+                eprintln!(
+                    "relief {} x {} px, {:.1} x {:.1} mm, depth {:.2} mm, {} silhouette edges -> {}",
+                    r.heights.w,
+                    r.heights.h,
+                    r.width_mm,
+                    r.height_mm,
+                    r.depth_mm,
+                    s.silhouette_edges,
+                    s.written.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+                );
+            }
+            if cli.verbose {
+                eprintln!(
+                    "stage timings ({} threads):\n{}",
+                    rayon::current_num_threads(),
+                    s.timings.report()
+                );
+            }
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

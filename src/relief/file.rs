@@ -1,0 +1,168 @@
+//! The relief file (DESIGN.md section 4): a 16-bit grayscale PNG (0 =
+//! lowest, 65535 = top of the depth) with a JSON sidecar giving its size.
+
+use super::Relief;
+use crate::bail;
+use crate::error::{Context, Result};
+use crate::grid::Grid;
+use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+use image::{ExtendedColorType, ImageEncoder};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+pub const FORMAT: &str = "relievo-relief/1";
+
+#[derive(Serialize, Deserialize, Debug, Clone)]
+pub struct Sidecar {
+    pub format: String,
+    pub width_mm: f64,
+    pub height_mm: f64,
+    pub depth_mm: f64,
+    pub pixels: [usize; 2],
+    #[serde(default)]
+    pub params: serde_json::Value,
+}
+
+/// `relief.png` -> `relief.json`.
+pub fn sidecar_path(png: &Path) -> PathBuf {
+    png.with_extension("json")
+}
+
+fn encode(w: usize, h: usize, bytes: &[u8], color: ExtendedColorType) -> Vec<u8> {
+    let mut out = Vec::new();
+    PngEncoder::new_with_quality(&mut out, CompressionType::Fast, FilterType::Sub)
+        .write_image(bytes, w as u32, h as u32, color)
+        .expect("encoding a PNG into memory cannot fail");
+    out
+}
+
+/// Encode a 16-bit grayscale PNG.
+pub fn png16(g: &Grid<u16>) -> Vec<u8> {
+    // the encoder takes native-endian samples and writes PNG's big-endian
+    let native: Vec<u8> = g.data.iter().flat_map(|v| v.to_ne_bytes()).collect();
+    encode(g.w, g.h, &native, ExtendedColorType::L16)
+}
+
+/// Encode an 8-bit grayscale PNG.
+pub fn png8(g: &Grid<u8>) -> Vec<u8> {
+    encode(g.w, g.h, &g.data, ExtendedColorType::L8)
+}
+
+/// Encode an 8-bit RGB PNG.
+pub fn png_rgb(w: usize, h: usize, rgb: &[u8]) -> Vec<u8> {
+    encode(w, h, rgb, ExtendedColorType::Rgb8)
+}
+
+/// Quantize to the file's 16 bits.
+pub fn quantize(r: &Relief) -> Grid<u16> {
+    let k = if r.depth_mm > 0.0 {
+        65535.0 / r.depth_mm
+    } else {
+        0.0
+    };
+    r.heights
+        .map(|v| ((*v as f64) * k).round().clamp(0.0, 65535.0) as u16)
+}
+
+/// The PNG and sidecar bytes of a relief.
+pub fn encode_relief(r: &Relief, params: serde_json::Value) -> (Vec<u8>, Vec<u8>) {
+    let png = png16(&quantize(r));
+    let side = Sidecar {
+        format: FORMAT.into(),
+        width_mm: r.width_mm,
+        height_mm: r.height_mm,
+        depth_mm: r.depth_mm,
+        pixels: [r.heights.w, r.heights.h],
+        params,
+    };
+    let mut json = serde_json::to_vec_pretty(&side).expect("sidecar serializes");
+    json.push(b'\n');
+    (png, json)
+}
+
+/// A grayscale PNG as values in [0, 1] (8 or 16 bit).
+pub fn read_gray(path: &Path) -> Result<Grid<f32>> {
+    let what = path.display().to_string();
+    let img = image::ImageReader::open(path)
+        .ctx(&what)?
+        .with_guessed_format()
+        .ctx(&what)?
+        .decode()
+        .ctx(&what)?;
+    let g = img.to_luma16();
+    let (w, h) = (g.width() as usize, g.height() as usize);
+    if w == 0 || h == 0 {
+        bail!("{what}: empty image");
+    }
+    Ok(Grid::from_vec(
+        w,
+        h,
+        g.into_raw()
+            .into_iter()
+            .map(|v| v as f32 / 65535.0)
+            .collect(),
+    ))
+}
+
+/// Load a relief: the sidecar gives its size; a plain heightmap needs
+/// `width_mm` and `depth_mm` (which also override a sidecar).
+pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result<Relief> {
+    let what = path.display().to_string();
+    let g = read_gray(path)?;
+    let side_path = sidecar_path(path);
+    let side: Option<Sidecar> = if side_path.exists() {
+        let text = std::fs::read_to_string(&side_path).ctx(side_path.display())?;
+        Some(serde_json::from_str(&text).ctx(side_path.display())?)
+    } else {
+        None
+    };
+    let width = width_mm.or(side.as_ref().map(|s| s.width_mm));
+    let depth = depth_mm.or(side.as_ref().map(|s| s.depth_mm));
+    let (Some(width), Some(depth)) = (width, depth) else {
+        bail!(
+            "{what}: no sidecar {}; give --width and --depth in mm",
+            side_path.display()
+        );
+    };
+    if !(width > 0.0 && depth > 0.0 && width.is_finite() && depth.is_finite()) {
+        bail!("{what}: width and depth must be positive (got {width} x {depth} mm)");
+    }
+    let heights = g.map(|v| (*v as f64 * depth) as f32);
+    Ok(Relief {
+        width_mm: width,
+        height_mm: width * g.h as f64 / g.w as f64,
+        depth_mm: depth,
+        heights,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn relief_round_trips_through_png_and_sidecar() {
+        let dir = std::env::temp_dir().join(format!("relievo-file-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let heights = Grid::from_vec(4, 2, vec![0.0, 1.0, 2.0, 3.0, 0.5, 1.5, 2.5, 3.0]);
+        let r = Relief {
+            heights,
+            width_mm: 40.0,
+            height_mm: 20.0,
+            depth_mm: 3.0,
+        };
+        let (png, json) = encode_relief(&r, serde_json::json!({"alpha": 4}));
+        let p = dir.join("r.png");
+        std::fs::write(&p, png).unwrap();
+        std::fs::write(sidecar_path(&p), json).unwrap();
+        let back = load(&p, None, None).unwrap();
+        assert_eq!(
+            (back.width_mm, back.height_mm, back.depth_mm),
+            (40.0, 20.0, 3.0)
+        );
+        for (a, b) in back.heights.data.iter().zip(&r.heights.data) {
+            assert!((a - b).abs() < 1e-4);
+        }
+        std::fs::remove_dir_all(dir).unwrap();
+    }
+}

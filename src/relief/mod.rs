@@ -1,0 +1,215 @@
+//! Stage 2: a shaped gradient field in, a relief in millimetres out
+//! (paper sections 3.2-3.3): feature and selective scaling, Poisson
+//! integration, optional constant steps at outlines, scaling to depth.
+
+pub mod bands;
+pub mod file;
+pub mod gradient;
+pub mod poisson;
+
+use crate::bail;
+use crate::error::Result;
+use crate::grid::Grid;
+use crate::timing::Timings;
+use gradient::Field;
+use rayon::prelude::*;
+
+/// How depth is reduced to relief height.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// Weyrich et al. 2007: gradient-domain compression.
+    Gradient,
+    /// Cignoni et al. 1997: the depth buffer scaled linearly (baseline).
+    Linear,
+}
+
+/// Everything that shapes a relief after the field is made.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Params {
+    pub depth_mm: f64,
+    pub width_mm: f64,
+    pub alpha: f64,
+    pub silhouette: f64,
+    pub steps_mm: Option<f64>,
+    pub flat_background: bool,
+    pub bands: Vec<f64>,
+    pub mirror: bool,
+    pub invert: bool,
+    pub method: Method,
+}
+
+/// Selective scaling: slopes inside `weight` (0..1 per pixel) times `gain`.
+pub struct Stencil {
+    pub name: String,
+    pub weight: Grid<f32>,
+    pub gain: f64,
+}
+
+/// A relief: heights in mm, 0 = lowest point, `depth_mm` = highest.
+#[derive(Clone, Debug)]
+pub struct Relief {
+    pub heights: Grid<f32>,
+    pub width_mm: f64,
+    pub height_mm: f64,
+    pub depth_mm: f64,
+}
+
+impl Relief {
+    pub fn pitch_mm(&self) -> f64 {
+        self.width_mm / self.heights.w as f64
+    }
+}
+
+/// Scale a solved height field linearly so that max - min = depth and the
+/// lowest point is 0.
+fn to_mm(h: &Grid<f64>, depth: f64) -> Grid<f32> {
+    let (lo, hi) = h
+        .data
+        .par_iter()
+        .fold(|| (f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)))
+        .reduce(|| (f64::MAX, f64::MIN), |x, y| (x.0.min(y.0), x.1.max(y.1)));
+    let k = if hi > lo { depth / (hi - lo) } else { 0.0 };
+    h.map(|v| ((v - lo) * k) as f32)
+}
+
+fn range(a: &Grid<f64>, b: &Grid<f64>, c: f64) -> f64 {
+    let (lo, hi) = a
+        .data
+        .par_iter()
+        .zip(b.data.par_iter())
+        .map(|(x, y)| x + c * y)
+        .fold(|| (f64::MAX, f64::MIN), |(l, h), v| (l.min(v), h.max(v)))
+        .reduce(|| (f64::MAX, f64::MIN), |x, y| (x.0.min(y.0), x.1.max(y.1)));
+    hi - lo
+}
+
+impl Params {
+    pub fn validate(&self) -> Result<()> {
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        if !pos(self.depth_mm) || self.depth_mm > 1000.0 {
+            bail!(
+                "--depth {}: must be a positive number of mm up to 1000",
+                self.depth_mm
+            );
+        }
+        if !pos(self.width_mm) || self.width_mm > 100_000.0 {
+            bail!(
+                "--width {}: must be a positive number of mm up to 100000",
+                self.width_mm
+            );
+        }
+        if !self.alpha.is_finite() || self.alpha < 0.0 {
+            bail!(
+                "--alpha {}: must be 0 (no compression) or positive",
+                self.alpha
+            );
+        }
+        if !pos(self.silhouette) {
+            bail!("--silhouette {}: must be a positive slope", self.silhouette);
+        }
+        if let Some(s) = self.steps_mm {
+            if !pos(s) || s >= self.depth_mm {
+                bail!(
+                    "--steps {s}: must be positive and smaller than the depth ({} mm)",
+                    self.depth_mm
+                );
+            }
+        }
+        if self.bands.len() > 10 || self.bands.iter().any(|a| !a.is_finite() || *a < 0.0) {
+            bail!("--bands: at most 10 gains, each a number >= 0");
+        }
+        Ok(())
+    }
+}
+
+/// Turn a shaped field into a relief.
+pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -> Result<Relief> {
+    p.validate()?;
+    let (w, h) = (field.gx.w, field.gx.h);
+    let n = w.max(h);
+    let mut heights = match p.method {
+        Method::Linear => t.time("linear scale", || {
+            to_mm(&field.depth.map(|v| *v as f64), p.depth_mm)
+        }),
+        Method::Gradient => {
+            let (mut gx, mut gy) = (field.gx.clone(), field.gy.clone());
+            if !p.bands.is_empty() {
+                (gx, gy) = t.time("feature bands", || {
+                    rayon::join(
+                        || bands::feature_scale(&gx, &field.barrier, &p.bands),
+                        || bands::feature_scale(&gy, &field.barrier, &p.bands),
+                    )
+                });
+            }
+            for s in stencils {
+                t.time("selective scale", || {
+                    for g in [&mut gx, &mut gy] {
+                        g.data
+                            .par_iter_mut()
+                            .zip(s.weight.data.par_iter())
+                            .for_each(|(v, wt)| {
+                                *v *= 1.0 + (s.gain as f32 - 1.0) * wt;
+                            });
+                    }
+                });
+            }
+            if p.flat_background && field.mask.data.iter().all(|&m| m) {
+                bail!("--flat-background: the input has no background pixels to hold at 0");
+            }
+            let solve = |gx: &Grid<f32>, gy: &Grid<f32>| {
+                let div = poisson::divergence(gx, gy, 1.0 / n as f64);
+                if p.flat_background {
+                    poisson::solve_masked(&div, &field.mask).0
+                } else {
+                    poisson::solve_neumann(&div)
+                }
+            };
+            let main = t.time("poisson", || solve(&gx, &gy));
+            match p.steps_mm {
+                Some(s) if field.silhouette_edges > 0 => {
+                    let steps = t.time("poisson (steps)", || solve(&field.sx, &field.sy));
+                    // choose c so a unit step (1 / n_fine of h) becomes s mm
+                    // after the final scaling to depth
+                    let nf = field.n_fine as f64;
+                    let mut c = s * nf * range(&main, &steps, 0.0) / p.depth_mm;
+                    let mut converged = false;
+                    for _ in 0..200 {
+                        let next = s * nf * range(&main, &steps, c) / p.depth_mm;
+                        converged = (next - c).abs() <= 1e-9 * c.abs();
+                        c = next;
+                        if converged || !c.is_finite() {
+                            break;
+                        }
+                    }
+                    if !converged || c <= 0.0 {
+                        bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");
+                    }
+                    let mut total = main;
+                    total
+                        .data
+                        .par_iter_mut()
+                        .zip(steps.data.par_iter())
+                        .for_each(|(a, b)| *a += c * b);
+                    to_mm(&total, p.depth_mm)
+                }
+                _ => to_mm(&main, p.depth_mm),
+            }
+        }
+    };
+    if p.invert {
+        heights
+            .data
+            .par_iter_mut()
+            .for_each(|v| *v = p.depth_mm as f32 - *v);
+    }
+    if p.mirror {
+        heights.flip_x();
+    }
+    Ok(Relief {
+        heights,
+        width_mm: p.width_mm,
+        height_mm: p.width_mm * h as f64 / w as f64,
+        depth_mm: p.depth_mm,
+    })
+}

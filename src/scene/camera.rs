@@ -1,0 +1,218 @@
+//! Camera: a view direction from presets plus yaw/pitch, perspective or
+//! orthographic, with near/far fitted tightly around the scene. Projects
+//! vertices to pixel coordinates and OpenGL-style depth h in [0,1]
+//! (1 = nearest scene point, 0 = far plane = background).
+
+use crate::bail;
+use crate::error::Result;
+use glam::DVec3;
+
+/// Named view directions: where the eye sits as seen from the model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum View {
+    Front,
+    Back,
+    Left,
+    Right,
+    Top,
+    Bottom,
+}
+
+impl View {
+    /// (yaw, pitch) in degrees of this preset.
+    pub fn angles(self) -> (f64, f64) {
+        match self {
+            View::Front => (0.0, 0.0),
+            View::Back => (180.0, 0.0),
+            View::Left => (-90.0, 0.0),
+            View::Right => (90.0, 0.0),
+            View::Top => (0.0, 90.0),
+            View::Bottom => (0.0, -90.0),
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct Camera {
+    pub view: View,
+    /// Added to the preset's yaw (about +y), degrees.
+    pub yaw: f64,
+    /// Added to the preset's pitch (eye raised toward +y), degrees.
+    pub pitch: f64,
+    /// Full vertical/horizontal field of view in degrees; 0 = orthographic.
+    pub fov: f64,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Camera {
+            view: View::Front,
+            yaw: 0.0,
+            pitch: 0.0,
+            fov: 20.0,
+        }
+    }
+}
+
+/// Vertices in pixel space of an image `w x h` pixels, with depth.
+pub struct Projection {
+    /// (x, y, h): x right, y down, in pixels; h in [0,1].
+    pub points: Vec<[f64; 3]>,
+    pub w: usize,
+    pub h: usize,
+}
+
+impl Camera {
+    pub fn validate(&self) -> Result<()> {
+        if !(0.0..=170.0).contains(&self.fov) || !self.fov.is_finite() {
+            bail!(
+                "--fov {}: must be between 0 (orthographic) and 170 degrees",
+                self.fov
+            );
+        }
+        if !self.yaw.is_finite() || !self.pitch.is_finite() {
+            bail!("--yaw/--pitch must be finite numbers");
+        }
+        Ok(())
+    }
+
+    /// Eye direction e (from scene centre toward the eye), image right r and up u.
+    pub fn basis(&self) -> (DVec3, DVec3, DVec3) {
+        let (y0, p0) = self.view.angles();
+        let yaw = (y0 + self.yaw).to_radians();
+        let pitch = (p0 + self.pitch).to_radians();
+        let e = DVec3::new(
+            yaw.sin() * pitch.cos(),
+            pitch.sin(),
+            yaw.cos() * pitch.cos(),
+        );
+        let r = DVec3::new(yaw.cos(), 0.0, -yaw.sin());
+        let u = e.cross(r);
+        (e, r, u)
+    }
+
+    /// Project `positions` into an image whose long side is `long_px`
+    /// pixels times `supersample`; the frame hugs the scene with a small
+    /// margin of background so every outline lies inside.
+    pub fn project(&self, positions: &[DVec3], long_px: usize, supersample: usize) -> Projection {
+        let (e, r, u) = self.basis();
+        let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+        for p in positions {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        let c = (lo + hi) * 0.5;
+        let radius = positions
+            .iter()
+            .map(|p| (*p - c).length())
+            .fold(0.0, f64::max)
+            .max(1e-30);
+        let persp = self.fov > 0.0;
+        let dist = if persp {
+            radius / (self.fov.to_radians() * 0.5).sin()
+        } else {
+            radius
+        };
+        // (screen x, screen y, distance along the view axis)
+        let view: Vec<[f64; 3]> = positions
+            .iter()
+            .map(|p| {
+                let d = *p - c;
+                let z = dist - d.dot(e);
+                let (x, y) = (d.dot(r), d.dot(u));
+                if persp {
+                    [x / z, y / z, z]
+                } else {
+                    [x, y, z]
+                }
+            })
+            .collect();
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        let (mut near, mut far) = (f64::MAX, f64::MIN);
+        for v in &view {
+            x0 = x0.min(v[0]);
+            x1 = x1.max(v[0]);
+            y0 = y0.min(v[1]);
+            y1 = y1.max(v[1]);
+            near = near.min(v[2]);
+            far = far.max(v[2]);
+        }
+        let span = (x1 - x0).max(y1 - y0).max(1e-30);
+        let margin = span * (0.02f64).max(2.5 / long_px as f64);
+        let (ex, ey) = (x1 - x0 + 2.0 * margin, y1 - y0 + 2.0 * margin);
+        let scale = long_px as f64 / ex.max(ey);
+        let w = ((ex * scale).round() as usize).max(1);
+        let h = ((ey * scale).round() as usize).max(1);
+        let s = scale * supersample as f64;
+        let flat = far - near <= 1e-9 * radius;
+        let points = view
+            .iter()
+            .map(|v| {
+                let depth = if flat {
+                    1.0
+                } else if persp {
+                    (1.0 / v[2] - 1.0 / far) / (1.0 / near - 1.0 / far)
+                } else {
+                    (far - v[2]) / (far - near)
+                };
+                [
+                    (v[0] - x0 + margin) * s,
+                    (y1 + margin - v[1]) * s,
+                    depth.clamp(0.0, 1.0),
+                ]
+            })
+            .collect();
+        Projection {
+            points,
+            w: w * supersample,
+            h: h * supersample,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_are_orthonormal_and_right_handed() {
+        for v in [
+            View::Front,
+            View::Back,
+            View::Left,
+            View::Right,
+            View::Top,
+            View::Bottom,
+        ] {
+            let cam = Camera {
+                view: v,
+                ..Default::default()
+            };
+            let (e, r, u) = cam.basis();
+            assert!((e.length() - 1.0).abs() < 1e-12 && (r.length() - 1.0).abs() < 1e-12);
+            assert!(e.dot(r).abs() < 1e-12 && e.dot(u).abs() < 1e-12 && r.dot(u).abs() < 1e-12);
+            assert!((r.cross(u) - e).length() < 1e-12);
+        }
+        let (e, _, u) = Camera {
+            view: View::Top,
+            ..Default::default()
+        }
+        .basis();
+        assert!((e - DVec3::Y).length() < 1e-12 && (u + DVec3::Z).length() < 1e-12);
+    }
+
+    #[test]
+    fn perspective_depth_is_one_at_nearest_zero_at_farthest() {
+        let pts = [
+            DVec3::new(0.0, 0.0, 1.0),
+            DVec3::new(1.0, 1.0, -1.0),
+            DVec3::ZERO,
+        ];
+        let pr = Camera::default().project(&pts, 64, 1);
+        assert!((pr.points[0][2] - 1.0).abs() < 1e-12);
+        assert!(pr.points[1][2].abs() < 1e-12);
+        assert!(pr.points[2][2] > 0.0 && pr.points[2][2] < 1.0);
+        assert_eq!(pr.w.max(pr.h), 64);
+    }
+}

@@ -1,0 +1,229 @@
+//! Triangle meshes from OBJ (tobj) and STL (stl_io), checked before use:
+//! a mesh that reaches the rasterizer has finite vertices, in-range indices
+//! and at least one triangle.
+
+use crate::bail;
+use crate::error::{Context, Result};
+use glam::{Mat4, Vec3};
+use std::io::{BufRead, Read};
+use std::path::Path;
+
+/// A triangle soup with object names kept (for selective scaling).
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+    /// Index into `objects` for each triangle.
+    pub tri_object: Vec<u16>,
+    pub objects: Vec<String>,
+}
+
+impl Mesh {
+    /// Append another mesh transformed by `m`, keeping its object names.
+    pub fn append(&mut self, other: &Mesh, m: Mat4) {
+        let base = self.positions.len() as u32;
+        let obase = self.objects.len() as u16;
+        self.positions
+            .extend(other.positions.iter().map(|p| m.transform_point3(*p)));
+        self.triangles
+            .extend(other.triangles.iter().map(|t| t.map(|i| i + base)));
+        self.tri_object
+            .extend(other.tri_object.iter().map(|o| o + obase));
+        self.objects.extend(other.objects.iter().cloned());
+    }
+
+    /// Add one named object from raw parts.
+    pub fn push_object(&mut self, name: &str, positions: &[Vec3], triangles: &[[u32; 3]]) {
+        let base = self.positions.len() as u32;
+        let id = self.objects.len() as u16;
+        self.objects.push(name.to_string());
+        self.positions.extend_from_slice(positions);
+        self.triangles
+            .extend(triangles.iter().map(|t| t.map(|i| i + base)));
+        self.tri_object
+            .extend(std::iter::repeat_n(id, triangles.len()));
+    }
+
+    /// Axis-aligned bounds of the vertices that triangles use.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for t in &self.triangles {
+            for &i in t {
+                let p = self.positions[i as usize];
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Reject what would break later stages, naming `what`.
+    pub fn validate(&self, what: &str) -> Result<()> {
+        if self.triangles.is_empty() {
+            bail!("{what}: the model has no triangles (empty scene)");
+        }
+        let n = self.positions.len() as u32;
+        for (k, t) in self.triangles.iter().enumerate() {
+            if let Some(&i) = t.iter().find(|&&i| i >= n) {
+                bail!(
+                    "{what}: triangle {} refers to vertex {} but there are only {n}",
+                    k + 1,
+                    i + 1
+                );
+            }
+        }
+        if let Some(k) = self.positions.iter().position(|p| !p.is_finite()) {
+            bail!(
+                "{what}: vertex {} has a coordinate that is not a finite number",
+                k + 1
+            );
+        }
+        let (lo, hi) = self.bounds();
+        if (hi - lo).max_element() <= 0.0 {
+            bail!("{what}: all triangles collapse to one point");
+        }
+        if (hi - lo).max_element() > 1e15 {
+            bail!(
+                "{what}: the model is absurdly large ({})",
+                (hi - lo).max_element()
+            );
+        }
+        if self.objects.len() > u16::MAX as usize - 1 {
+            bail!("{what}: more than {} objects", u16::MAX - 1);
+        }
+        Ok(())
+    }
+}
+
+/// Load an OBJ or STL file, chosen by extension.
+pub fn load(path: &Path) -> Result<Mesh> {
+    let what = path.display().to_string();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .unwrap_or("")
+        .to_ascii_lowercase();
+    let mesh = match ext.as_str() {
+        "obj" => {
+            let f = std::fs::File::open(path).ctx(&what)?;
+            read_obj(&mut std::io::BufReader::new(f), &what)?
+        }
+        "stl" => read_stl(&std::fs::read(path).ctx(&what)?, &what)?,
+        _ => bail!("{what}: unknown model format '.{ext}' (expected .obj, .stl or .png)"),
+    };
+    mesh.validate(&what)?;
+    Ok(mesh)
+}
+
+/// Parse OBJ text: every object and group becomes one named object.
+pub fn read_obj(reader: &mut impl BufRead, what: &str) -> Result<Mesh> {
+    let opts = tobj::LoadOptions {
+        triangulate: true,
+        single_index: false,
+        ..Default::default()
+    };
+    let (models, _materials) =
+        tobj::load_obj_buf(reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed)).ctx(what)?;
+    let mut mesh = Mesh::default();
+    for m in &models {
+        let p = &m.mesh.positions;
+        let pos: Vec<Vec3> = p
+            .chunks_exact(3)
+            .map(|c| Vec3::new(c[0], c[1], c[2]))
+            .collect();
+        let tris: Vec<[u32; 3]> = m
+            .mesh
+            .indices
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        if !tris.is_empty() {
+            mesh.push_object(&m.name, &pos, &tris);
+        }
+    }
+    Ok(mesh)
+}
+
+/// Parse ASCII or binary STL. The binary size is checked first so that a
+/// garbage header cannot ask for billions of facets.
+pub fn read_stl(bytes: &[u8], what: &str) -> Result<Mesh> {
+    let ascii = bytes.trim_ascii_start().starts_with(b"solid")
+        && bytes.iter().take(1024).all(|b| b.is_ascii());
+    if !ascii {
+        if bytes.len() < 84 {
+            bail!("{what}: not an STL file (too short for a binary STL header)");
+        }
+        let n = u32::from_le_bytes([bytes[80], bytes[81], bytes[82], bytes[83]]) as usize;
+        if 84 + 50 * n != bytes.len() {
+            bail!(
+                "{what}: not a valid binary STL ({} bytes, but the header announces {n} triangles = {} bytes)",
+                bytes.len(),
+                84 + 50 * n
+            );
+        }
+    }
+    let mut cur = std::io::Cursor::new(bytes);
+    let m = stl_io::read_stl(&mut cur).ctx(what)?;
+    let mut rest = Vec::new();
+    cur.read_to_end(&mut rest).ok();
+    let pos: Vec<Vec3> = m
+        .vertices
+        .iter()
+        .map(|v| Vec3::new(v[0], v[1], v[2]))
+        .collect();
+    let tris: Vec<[u32; 3]> = m
+        .faces
+        .iter()
+        .map(|f| f.vertices.map(|i| i as u32))
+        .collect();
+    let mut mesh = Mesh::default();
+    let name = Path::new(what)
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("stl");
+    mesh.push_object(name, &pos, &tris);
+    Ok(mesh)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn obj(text: &str) -> Result<Mesh> {
+        let m = read_obj(&mut std::io::Cursor::new(text.as_bytes()), "t.obj")?;
+        m.validate("t.obj")?;
+        Ok(m)
+    }
+
+    #[test]
+    fn obj_objects_and_groups_keep_names() {
+        let m = obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\no a\nf 1 2 3\ng b\nf 2 4 3\n").unwrap();
+        assert_eq!(m.objects, vec!["a", "b"]);
+        assert_eq!(m.tri_object, vec![0, 1]);
+    }
+
+    #[test]
+    fn obj_errors() {
+        assert!(obj("").unwrap_err().0.contains("no triangles"));
+        assert!(obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n").is_err());
+        let e = obj("v 0 0 nan\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap_err();
+        assert!(e.0.contains("finite"), "{e}");
+    }
+
+    #[test]
+    fn stl_rejects_garbage_and_reads_binary() {
+        assert!(read_stl(&[7u8; 300], "g.stl").is_err());
+        let mut b = vec![0u8; 80];
+        b.extend(1u32.to_le_bytes());
+        for v in [
+            0.0f32, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ] {
+            b.extend(v.to_le_bytes());
+        }
+        b.extend([0u8, 0]);
+        let m = read_stl(&b, "t.stl").unwrap();
+        assert_eq!(m.triangles.len(), 1);
+        m.validate("t.stl").unwrap();
+    }
+}
