@@ -204,14 +204,12 @@ mod tests {
         for j in 0..=n {
             for i in 0..=n {
                 let border = i == 0 || j == 0 || i == n || j == n;
-                let (jx, jy) = if border {
-                    (0.0, 0.0)
-                } else if (i + j) % 3 == 0 {
+                // border vertices and every third one sit exactly on a pixel centre
+                let (jx, jy) = if border || (i + j) % 3 == 0 {
                     (0.0, 0.0)
                 } else {
                     (rnd() * 1.5, rnd() * 1.5)
                 };
-                // every third vertex sits exactly on a pixel centre
                 pts.push([
                     2.0 + i as f64 * 4.0 + 0.5 + jx,
                     2.0 + j as f64 * 4.0 + 0.5 + jy,
