@@ -112,101 +112,58 @@ pub fn compress(x: f64, alpha: f64) -> f64 {
 
 /// One source pixel shaped: (gx, gy, step x, step y).
 #[inline]
-fn shape(g: (f32, f32), s: Shaping) -> [f32; 4] {
-    let sil_x = (g.0.abs() as f64) > s.threshold;
-    let sil_y = (g.1.abs() as f64) > s.threshold;
-    let rx = if sil_x { 0.0 } else { g.0 as f64 };
-    let ry = if sil_y { 0.0 } else { g.1 as f64 };
+fn shape(g: (f32, f32), alpha: f32, threshold: f32) -> [f32; 4] {
+    let sil_x = g.0.abs() > threshold;
+    let sil_y = g.1.abs() > threshold;
+    let rx = if sil_x { 0.0 } else { g.0 };
+    let ry = if sil_y { 0.0 } else { g.1 };
     let m = (rx * rx + ry * ry).sqrt();
-    let f = if m > 0.0 {
-        compress(m, s.alpha) / m
+    let f = if m > 0.0 && alpha > 0.0 {
+        (alpha * m).ln_1p() / (alpha * m)
     } else {
-        0.0
+        1.0
     };
     let step = |sil: bool, v: f32| if sil { v.signum() } else { 0.0 };
-    [
-        (rx * f) as f32,
-        (ry * f) as f32,
-        step(sil_x, g.0),
-        step(sil_y, g.1),
-    ]
+    [rx * f, ry * f, step(sil_x, g.0), step(sil_y, g.1)]
+}
+
+/// Output rows made per parallel task (source rows shared between
+/// neighbouring output rows are shaped once per block).
+const BLOCK: usize = 16;
+
+/// One block of output rows, written in place.
+struct OutRows<'a> {
+    gx: &'a mut [f32],
+    gy: &'a mut [f32],
+    sx: &'a mut [f32],
+    sy: &'a mut [f32],
+    barrier: &'a mut [bool],
+    mask: &'a mut [bool],
+    id: &'a mut [u16],
+    depth: &'a mut [f32],
 }
 
 /// Shape `src` and bring it down by `factor` (1 or 2). For factor 2 an
 /// output slope is the [1 2 1]/4 filter of source slopes along its axis and
 /// the mean of the two source rows/columns across it: exactly the slope
 /// between neighbouring output samples when each is its 2x2 mean.
-pub fn shape_field(src: &dyn Source, factor: usize, s: Shaping) -> Field {
-    assert!(factor == 1 || factor == 2);
+pub fn shape_field<S: Source>(src: &S, factor: usize, s: Shaping) -> Field {
+    match factor {
+        1 => shape_with::<S, 1, 1, 1>(src, s, [1.0], [1.0]),
+        2 => shape_with::<S, 2, 3, 2>(src, s, [0.25, 0.5, 0.25], [0.5, 0.5]),
+        _ => panic!("supersampling factor must be 1 or 2"),
+    }
+}
+
+fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
+    src: &S,
+    s: Shaping,
+    along: [f32; A],
+    across: [f32; C],
+) -> Field {
     let (fw, fh) = src.size();
-    let (w, h) = (fw / factor, fh / factor);
-    let along: &[f32] = if factor == 1 {
-        &[1.0]
-    } else {
-        &[0.25, 0.5, 0.25]
-    };
-    let across: &[f32] = if factor == 1 { &[1.0] } else { &[0.5, 0.5] };
-    let rows: Vec<_> = (0..h)
-        .into_par_iter()
-        .map(|y| {
-            // shaped source rows factor*y .. factor*y + along.len()
-            let y0 = factor * y;
-            let nrows = along.len().min(fh - y0);
-            let shaped: Vec<Vec<[f32; 4]>> = (0..nrows)
-                .map(|r| (0..fw).map(|x| shape(src.slope(x, y0 + r), s)).collect())
-                .collect();
-            let mut out = RowOut::new(w);
-            let mut sil = 0usize;
-            for x in 0..w {
-                let x0 = factor * x;
-                let (mut gx, mut gy, mut sx, mut sy) = (0.0f32, 0.0, 0.0, 0.0);
-                for (a, wa) in along.iter().enumerate() {
-                    for (c, wc) in across.iter().enumerate() {
-                        if let Some(p) = shaped.get(c).and_then(|r| r.get(x0 + a)) {
-                            gx += wa * wc * p[0];
-                            sx += wa * wc * p[2];
-                        }
-                        if let Some(p) = shaped.get(a).and_then(|r| r.get(x0 + c)) {
-                            gy += wa * wc * p[1];
-                            sy += wa * wc * p[3];
-                        }
-                    }
-                }
-                let (mut fg, mut barrier, mut best, mut id, mut dsum) =
-                    (false, false, f32::MIN, 0u16, 0.0f32);
-                for (r, row) in shaped.iter().enumerate().take(factor) {
-                    for c in 0..factor {
-                        let p = row[x0 + c];
-                        if p[2] != 0.0 || p[3] != 0.0 {
-                            barrier = true;
-                            sil += (p[2] != 0.0) as usize + (p[3] != 0.0) as usize;
-                        }
-                        let (d, i) = (src.depth(x0 + c, y0 + r), src.id(x0 + c, y0 + r));
-                        dsum += d;
-                        if i != 0 && d > best {
-                            best = d;
-                            id = i;
-                            fg = true;
-                        }
-                    }
-                }
-                // a silhouette edge also bars the pixel on its far side
-                if x0 > 0 && shaped.iter().take(factor).any(|r| r[x0 - 1][2] != 0.0) {
-                    barrier = true;
-                }
-                out.set(
-                    x,
-                    [gx, gy, sx, sy],
-                    barrier,
-                    fg,
-                    id,
-                    dsum / (factor * factor) as f32,
-                );
-            }
-            (out, sil)
-        })
-        .collect();
-    // a vertical silhouette edge bars the pixel below it too
+    let (w, h) = (fw / F, fh / F);
+    let (alpha, threshold) = (s.alpha as f32, s.threshold as f32);
     let mut f = Field {
         gx: Grid::new(w, h, 0.0),
         gy: Grid::new(w, h, 0.0),
@@ -219,18 +176,101 @@ pub fn shape_field(src: &dyn Source, factor: usize, s: Shaping) -> Field {
         n_fine: fw.max(fh),
         silhouette_edges: 0,
     };
-    for (y, (r, sil)) in rows.into_iter().enumerate() {
-        let o = y * w;
-        f.gx.data[o..o + w].copy_from_slice(&r.g[0]);
-        f.gy.data[o..o + w].copy_from_slice(&r.g[1]);
-        f.sx.data[o..o + w].copy_from_slice(&r.g[2]);
-        f.sy.data[o..o + w].copy_from_slice(&r.g[3]);
-        f.barrier.data[o..o + w].copy_from_slice(&r.barrier);
-        f.mask.data[o..o + w].copy_from_slice(&r.fg);
-        f.id.data[o..o + w].copy_from_slice(&r.id);
-        f.depth.data[o..o + w].copy_from_slice(&r.depth);
-        f.silhouette_edges += sil;
-    }
+    let n = BLOCK * w;
+    let blocks =
+        f.gx.data
+            .par_chunks_mut(n)
+            .zip(f.gy.data.par_chunks_mut(n))
+            .zip(f.sx.data.par_chunks_mut(n))
+            .zip(f.sy.data.par_chunks_mut(n))
+            .zip(f.barrier.data.par_chunks_mut(n))
+            .zip(f.mask.data.par_chunks_mut(n))
+            .zip(f.id.data.par_chunks_mut(n))
+            .zip(f.depth.data.par_chunks_mut(n))
+            .enumerate()
+            .map(
+                |(b, (((((((gx, gy), sx), sy), barrier), mask), id), depth))| {
+                    (
+                        b,
+                        OutRows {
+                            gx,
+                            gy,
+                            sx,
+                            sy,
+                            barrier,
+                            mask,
+                            id,
+                            depth,
+                        },
+                    )
+                },
+            );
+    f.silhouette_edges = blocks
+        .map_init(Vec::new, |shaped: &mut Vec<[f32; 4]>, (b, out)| {
+            let ya = b * BLOCK;
+            let yb = ya + out.gx.len() / w;
+            // shaped source rows fa .. fb, kept in a per-thread buffer
+            let fa = F * ya;
+            let fb = (F * (yb - 1) + A).min(fh);
+            shaped.clear();
+            for fy in fa..fb {
+                shaped.extend((0..fw).map(|x| shape(src.slope(x, fy), alpha, threshold)));
+            }
+            let at = |fy: usize, fx: usize| -> [f32; 4] {
+                if fy < fb && fx < fw {
+                    shaped[(fy - fa) * fw + fx]
+                } else {
+                    [0.0; 4]
+                }
+            };
+            let mut sil = 0usize;
+            for y in ya..yb {
+                let y0 = F * y;
+                for x in 0..w {
+                    let x0 = F * x;
+                    let (mut gx, mut gy, mut sx, mut sy) = (0.0f32, 0.0, 0.0, 0.0);
+                    for (a, wa) in along.iter().enumerate() {
+                        for (c, wc) in across.iter().enumerate() {
+                            let p = at(y0 + c, x0 + a);
+                            gx += wa * wc * p[0];
+                            sx += wa * wc * p[2];
+                            let q = at(y0 + a, x0 + c);
+                            gy += wa * wc * q[1];
+                            sy += wa * wc * q[3];
+                        }
+                    }
+                    let (mut fg, mut barrier, mut best, mut id, mut dsum) =
+                        (false, false, f32::MIN, 0u16, 0.0f32);
+                    for r in 0..F {
+                        for c in 0..F {
+                            let p = at(y0 + r, x0 + c);
+                            if p[2] != 0.0 || p[3] != 0.0 {
+                                barrier = true;
+                                sil += (p[2] != 0.0) as usize + (p[3] != 0.0) as usize;
+                            }
+                            let (d, i) = (src.depth(x0 + c, y0 + r), src.id(x0 + c, y0 + r));
+                            dsum += d;
+                            if i != 0 && d > best {
+                                best = d;
+                                id = i;
+                                fg = true;
+                            }
+                        }
+                    }
+                    // a silhouette edge also bars the pixel on its far side
+                    if x0 > 0 && (0..F).any(|r| at(y0 + r, x0 - 1)[2] != 0.0) {
+                        barrier = true;
+                    }
+                    let k = (y - ya) * w + x;
+                    (out.gx[k], out.gy[k], out.sx[k], out.sy[k]) = (gx, gy, sx, sy);
+                    (out.barrier[k], out.mask[k], out.id[k]) = (barrier, fg, id);
+                    out.depth[k] = dsum / (F * F) as f32;
+                }
+            }
+            sil
+        })
+        .sum();
+    // a horizontal silhouette edge bars the pixel below it too
     for y in (1..h).rev() {
         for x in 0..w {
             if *f.sy.get(x, y - 1) != 0.0 {
@@ -239,35 +279,6 @@ pub fn shape_field(src: &dyn Source, factor: usize, s: Shaping) -> Field {
         }
     }
     f
-}
-
-struct RowOut {
-    g: [Vec<f32>; 4],
-    barrier: Vec<bool>,
-    fg: Vec<bool>,
-    id: Vec<u16>,
-    depth: Vec<f32>,
-}
-
-impl RowOut {
-    fn new(w: usize) -> Self {
-        RowOut {
-            g: std::array::from_fn(|_| vec![0.0; w]),
-            barrier: vec![false; w],
-            fg: vec![false; w],
-            id: vec![0; w],
-            depth: vec![0.0; w],
-        }
-    }
-    fn set(&mut self, x: usize, g: [f32; 4], barrier: bool, fg: bool, id: u16, depth: f32) {
-        for (dst, v) in self.g.iter_mut().zip(g) {
-            dst[x] = v;
-        }
-        self.barrier[x] = barrier;
-        self.fg[x] = fg;
-        self.id[x] = id;
-        self.depth[x] = depth;
-    }
 }
 
 #[cfg(test)]
