@@ -50,25 +50,25 @@ struct ReliefArgs {
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pitch: f64,
     /// Field of view in degrees; 0 = orthographic.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
     fov: f64,
     /// Long side of the relief in pixels (meshes render at twice this).
-    #[arg(long, default_value_t = 512)]
+    #[arg(long, default_value_t = 512, allow_negative_numbers = true)]
     resolution: usize,
     /// Panel width in mm (the height follows the aspect).
-    #[arg(long, default_value_t = 100.0)]
+    #[arg(long, default_value_t = 100.0, allow_negative_numbers = true)]
     width: f64,
     /// Relief depth in mm [default: from --material, else 5].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     depth: Option<f64>,
     /// Compression strength: C(x) = ln(1 + alpha x) / alpha [default: from --material, else 4].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     alpha: Option<f64>,
     /// Silhouette threshold: a slope (scene depth per image width) above which an edge is an outline.
-    #[arg(long, default_value_t = 8.0)]
+    #[arg(long, default_value_t = 8.0, allow_negative_numbers = true)]
     silhouette: f64,
     /// Trace every outline with a constant step of this height (mm).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     steps: Option<f64>,
     /// Hold the background flat at height 0 (Dirichlet) instead of free.
     #[arg(long)]
@@ -83,7 +83,7 @@ struct ReliefArgs {
     #[arg(long)]
     stencil: Option<PathBuf>,
     /// Gain inside --stencil.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
     stencil_gain: f64,
     /// Material preset: depth ratio, bands and compression (see machines/materials.toml).
     #[arg(long)]
@@ -101,7 +101,7 @@ struct ReliefArgs {
     #[arg(long)]
     stl: Option<PathBuf>,
     /// Base thickness under the relief in the STL, mm.
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
     base: f64,
     /// Also write a shaded preview PNG.
     #[arg(long)]
@@ -206,7 +206,21 @@ fn run(cli: Cli) -> relievo::Result<()> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if !e.use_stderr() => {
+            // --help and --version
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            // one line, like every other error
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or("invalid arguments");
+            eprintln!("{} (see relievo --help)", first.trim_end());
+            return ExitCode::from(2);
+        }
+    };
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

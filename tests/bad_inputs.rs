@@ -1,0 +1,135 @@
+//! Bad input: one clear error line naming the input, a non-zero exit, no
+//! output file left behind, never a panic.
+
+mod common;
+use common::*;
+use std::path::Path;
+
+/// Run `relief` with `args` writing to `dir/out.png`; expect a clean failure
+/// whose message contains `names`.
+fn fails(dir: &Path, args: &[&str], names: &str) {
+    let out = dir.join("out.png");
+    let mut all = vec!["relief", "-o", out.to_str().unwrap(), "--stl", "out.stl"];
+    all.extend(args);
+    if !args.contains(&"--resolution") {
+        all.extend(["--resolution", "64"]);
+    }
+    let o = bin().current_dir(dir).args(&all).output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{args:?} succeeded");
+    assert!(
+        matches!(o.status.code(), Some(c) if c != 0),
+        "{args:?}: {err}"
+    );
+    assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "{args:?}: not one line: {err}"
+    );
+    assert!(err.starts_with("error: "), "{err}");
+    assert!(
+        err.contains(names),
+        "{args:?}: '{err}' does not name '{names}'"
+    );
+    let left: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.starts_with("out") || n.contains("tmp"))
+        .collect();
+    assert!(left.is_empty(), "{args:?} left {left:?}");
+}
+
+#[test]
+fn each_bad_input_fails_cleanly() {
+    let d = scratch("bad");
+    let w = |name: &str, bytes: &[u8]| {
+        std::fs::write(d.join(name), bytes).unwrap();
+        d.join(name).display().to_string()
+    };
+    let tri = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    let missing = d.join("missing.obj").display().to_string();
+    fails(&d, &[&missing], "missing.obj");
+    let empty = w("empty.obj", b"# nothing here\n");
+    fails(&d, &[&empty], "empty.obj");
+    let nan = w("nan.obj", format!("{tri}v nan 1 1\nf 1 2 4\n").as_bytes());
+    fails(&d, &[&nan], "nan.obj");
+    let range = w("range.obj", format!("{tri}f 1 2 7\n").as_bytes());
+    fails(&d, &[&range], "range.obj");
+    let garbage: Vec<u8> = (0..5000u32)
+        .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
+    let gobj = w("garbage.obj", &garbage);
+    fails(&d, &[&gobj], "garbage.obj");
+    let gstl = w("garbage.stl", &garbage);
+    fails(&d, &[&gstl], "garbage.stl");
+    let gpng = w("garbage.png", &garbage);
+    fails(&d, &[&gpng], "garbage.png");
+    let gext = w("garbage.bin", &garbage);
+    fails(&d, &[&gext], "garbage.bin");
+    let spot = fixture("spot.obj");
+    fails(&d, &[&spot, "--resolution", "0"], "--resolution 0");
+    fails(
+        &d,
+        &[&spot, "--resolution", "100000"],
+        "--resolution 100000",
+    );
+    fails(&d, &[&spot, "--resolution", "-3"], "--resolution");
+    fails(&d, &[&spot, "--bands", "2,x"], "--bands");
+    fails(&d, &[&spot, "--material", "unobtainium"], "unobtainium");
+    fails(&d, &[&spot, "--depth", "-1"], "--depth");
+    fails(&d, &[&spot, "--fov", "190"], "--fov");
+    fails(&d, &[&spot, "--steps", "9", "--depth", "3"], "--steps");
+    // unwritable output: a directory that does not exist, and a read-only one
+    let o = run(&[
+        "relief",
+        &spot,
+        "--resolution",
+        "32",
+        "-o",
+        d.join("no/such/dir/r.png").to_str().unwrap(),
+    ]);
+    assert!(
+        !o.status.success() && String::from_utf8_lossy(&o.stderr).contains("no/such/dir/r.png")
+    );
+    let ro = d.join("ro");
+    std::fs::create_dir(&ro).unwrap();
+    let mut perm = std::fs::metadata(&ro).unwrap().permissions();
+    perm.set_readonly(true);
+    std::fs::set_permissions(&ro, perm).unwrap();
+    let target = ro.join("r.png");
+    let o = run(&[
+        "relief",
+        &spot,
+        "--resolution",
+        "32",
+        "-o",
+        target.to_str().unwrap(),
+    ]);
+    let is_root = std::fs::write(ro.join("probe"), b"x").is_ok();
+    if !is_root {
+        assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("r.png"));
+        assert!(
+            std::fs::read_dir(&ro).unwrap().next().is_none(),
+            "left files in a read-only dir"
+        );
+    }
+    // one good output and one unwritable: neither is left behind
+    let o = run(&[
+        "relief",
+        &spot,
+        "--resolution",
+        "32",
+        "-o",
+        d.join("good.png").to_str().unwrap(),
+        "--preview",
+        d.join("nodir/p.png").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success());
+    assert!(!d.join("good.png").exists() && !d.join("good.json").exists());
+    let mut perm = std::fs::metadata(&ro).unwrap().permissions();
+    #[allow(clippy::permissions_set_readonly_false)]
+    perm.set_readonly(false);
+    std::fs::set_permissions(&ro, perm).unwrap();
+    std::fs::remove_dir_all(d).unwrap();
+}

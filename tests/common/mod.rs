@@ -1,0 +1,70 @@
+//! Helpers shared by the integration tests: run the real binary, read
+//! its outputs.
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_relievo"))
+}
+
+/// Run the binary with `args`; returns the output.
+pub fn run(args: &[&str]) -> Output {
+    bin().args(args).output().expect("relievo runs")
+}
+
+pub fn fixture(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("fixtures")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+/// A fresh scratch directory for one test.
+pub fn scratch(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("relievo-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A 16-bit grayscale PNG as (w, h, values 0..65535).
+pub fn read_png16(p: &Path) -> (usize, usize, Vec<u16>) {
+    let img = image::open(p)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+        .to_luma16();
+    (img.width() as usize, img.height() as usize, img.into_raw())
+}
+
+pub fn write_png16(p: &Path, w: usize, h: usize, v: &[u16]) {
+    image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w as u32, h as u32, v.to_vec())
+        .unwrap()
+        .save(p)
+        .unwrap();
+}
+
+pub fn sidecar(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p.with_extension("json")).unwrap()).unwrap()
+}
+
+/// Relief heights in mm from a relief PNG and its sidecar.
+pub fn relief_mm(p: &Path) -> (usize, usize, Vec<f64>, f64) {
+    let (w, h, v) = read_png16(p);
+    let depth = sidecar(p)["depth_mm"].as_f64().unwrap();
+    (
+        w,
+        h,
+        v.iter().map(|&x| x as f64 / 65535.0 * depth).collect(),
+        depth,
+    )
+}
+
+pub fn ok(out: &Output) {
+    assert!(
+        out.status.success(),
+        "relievo failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
