@@ -110,9 +110,10 @@ pub fn compress(x: f64, alpha: f64) -> f64 {
     }
 }
 
-/// One source pixel shaped: (gx, gy, step x, step y).
+/// One source pixel shaped: (gx, gy, step x, step y, silhouette bits:
+/// 1 = x edge, 2 = y edge).
 #[inline]
-fn shape(g: (f32, f32), alpha: f32, threshold: f32) -> [f32; 4] {
+fn shape(g: (f32, f32), alpha: f32, threshold: f32) -> [f32; 5] {
     let sil_x = g.0.abs() > threshold;
     let sil_y = g.1.abs() > threshold;
     let rx = if sil_x { 0.0 } else { g.0 };
@@ -124,7 +125,17 @@ fn shape(g: (f32, f32), alpha: f32, threshold: f32) -> [f32; 4] {
         1.0
     };
     let step = |sil: bool, v: f32| if sil { v.signum() } else { 0.0 };
-    [rx * f, ry * f, step(sil_x, g.0), step(sil_y, g.1)]
+    let bits = sil_x as u8 | (sil_y as u8) << 1;
+    [rx * f, ry * f, step(sil_x, g.0), step(sil_y, g.1), bits as f32]
+}
+
+/// A run of neighbouring silhouette edges of one sign across an outline
+/// (a surface turning away steeply just before its true edge) is one
+/// outline: only its steepest edge keeps the step.
+#[inline]
+fn dominated(v: f32, before: f32, after: f32, threshold: f32) -> bool {
+    let same = |u: f32| u.abs() > threshold && u.signum() == v.signum();
+    (same(before) && before.abs() > v.abs()) || (same(after) && after.abs() >= v.abs())
 }
 
 /// Output rows made per parallel task (source rows shared between
@@ -206,21 +217,51 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                 },
             );
     f.silhouette_edges = blocks
-        .map_init(Vec::new, |shaped: &mut Vec<[f32; 4]>, (b, out)| {
+        .map_init(
+            || (Vec::new(), Vec::new()),
+            |(raw, shaped): &mut (Vec<(f32, f32)>, Vec<[f32; 5]>), (b, out)| {
             let ya = b * BLOCK;
             let yb = ya + out.gx.len() / w;
             // shaped source rows fa .. fb, kept in a per-thread buffer
             let fa = F * ya;
             let fb = (F * (yb - 1) + A).min(fh);
-            shaped.clear();
-            for fy in fa..fb {
-                shaped.extend((0..fw).map(|x| shape(src.slope(x, fy), alpha, threshold)));
+            // raw slopes from two rows above (for the outline test and the
+            // barrier below a silhouette edge) to one row below the block
+            let ra = fa.saturating_sub(2);
+            let rb = (fb + 1).min(fh);
+            raw.clear();
+            for fy in ra..rb {
+                raw.extend((0..fw).map(|x| src.slope(x, fy)));
             }
-            let at = |fy: usize, fx: usize| -> [f32; 4] {
-                if fy < fb && fx < fw {
-                    shaped[(fy - fa) * fw + fx]
+            let rawat = |fy: usize, fx: usize| raw[(fy - ra) * fw + fx];
+            let sa = fa.saturating_sub(1);
+            shaped.clear();
+            for fy in sa..fb {
+                for x in 0..fw {
+                    let g = rawat(fy, x);
+                    let mut p = shape(g, alpha, threshold);
+                    if p[2] != 0.0 {
+                        let before = if x > 0 { rawat(fy, x - 1).0 } else { 0.0 };
+                        let after = if x + 1 < fw { rawat(fy, x + 1).0 } else { 0.0 };
+                        if dominated(g.0, before, after, threshold) {
+                            p[2] = 0.0;
+                        }
+                    }
+                    if p[3] != 0.0 {
+                        let before = if fy > 0 { rawat(fy - 1, x).1 } else { 0.0 };
+                        let after = if fy + 1 < rb { rawat(fy + 1, x).1 } else { 0.0 };
+                        if dominated(g.1, before, after, threshold) {
+                            p[3] = 0.0;
+                        }
+                    }
+                    shaped.push(p);
+                }
+            }
+            let at = |fy: usize, fx: usize| -> [f32; 5] {
+                if fy >= sa && fy < fb && fx < fw {
+                    shaped[(fy - sa) * fw + fx]
                 } else {
-                    [0.0; 4]
+                    [0.0; 5]
                 }
             };
             let mut sil = 0usize;
@@ -243,10 +284,10 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                         (false, false, f32::MIN, 0u16, 0.0f32);
                     for r in 0..F {
                         for c in 0..F {
-                            let p = at(y0 + r, x0 + c);
-                            if p[2] != 0.0 || p[3] != 0.0 {
+                            let bits = at(y0 + r, x0 + c)[4] as u8;
+                            if bits != 0 {
                                 barrier = true;
-                                sil += (p[2] != 0.0) as usize + (p[3] != 0.0) as usize;
+                                sil += (bits & 1) as usize + (bits >> 1) as usize;
                             }
                             let (d, i) = (src.depth(x0 + c, y0 + r), src.id(x0 + c, y0 + r));
                             dsum += d;
@@ -258,7 +299,9 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                         }
                     }
                     // a silhouette edge also bars the pixel on its far side
-                    if x0 > 0 && (0..F).any(|r| at(y0 + r, x0 - 1)[2] != 0.0) {
+                    let x_bit = |r: usize| at(y0 + r, x0 - 1)[4] as u8 & 1 != 0;
+                    let y_bit = |c: usize| y0 > 0 && at(y0 - 1, x0 + c)[4] as u8 & 2 != 0;
+                    if (x0 > 0 && (0..F).any(x_bit)) || (0..F).any(y_bit) {
                         barrier = true;
                     }
                     let k = (y - ya) * w + x;
@@ -268,16 +311,9 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                 }
             }
             sil
-        })
+        },
+        )
         .sum();
-    // a horizontal silhouette edge bars the pixel below it too
-    for y in (1..h).rev() {
-        for x in 0..w {
-            if *f.sy.get(x, y - 1) != 0.0 {
-                f.barrier.set(x, y, true);
-            }
-        }
-    }
     f
 }
 
