@@ -40,8 +40,16 @@ fn closed_form(v: &[u16], alpha: f64, theta: f64, depth: f64) -> Vec<f64> {
     for y in 0..H {
         for x in 0..W {
             let i = y * W + x;
-            let mut a = if x + 1 < W { n * (h[i + 1] - h[i]) } else { 0.0 };
-            let mut b = if y + 1 < H { n * (h[i + W] - h[i]) } else { 0.0 };
+            let mut a = if x + 1 < W {
+                n * (h[i + 1] - h[i])
+            } else {
+                0.0
+            };
+            let mut b = if y + 1 < H {
+                n * (h[i + W] - h[i])
+            } else {
+                0.0
+            };
             if a.abs() > theta {
                 a = 0.0;
             }
@@ -49,7 +57,11 @@ fn closed_form(v: &[u16], alpha: f64, theta: f64, depth: f64) -> Vec<f64> {
                 b = 0.0;
             }
             let m = (a * a + b * b).sqrt();
-            let c = if m > 0.0 { (1.0 + alpha * m).ln() / alpha / m } else { 0.0 };
+            let c = if m > 0.0 {
+                (1.0 + alpha * m).ln() / alpha / m
+            } else {
+                0.0
+            };
             gx[i] = a * c / n;
             gy[i] = b * c / n;
         }
@@ -76,7 +88,12 @@ fn closed_form(v: &[u16], alpha: f64, theta: f64, depth: f64) -> Vec<f64> {
             for x in 0..W {
                 let i = y * W + x;
                 let mut s = 0.0;
-                for (ok, j) in [(x > 0, i.wrapping_sub(1)), (x + 1 < W, i + 1), (y > 0, i.wrapping_sub(W)), (y + 1 < H, i + W)] {
+                for (ok, j) in [
+                    (x > 0, i.wrapping_sub(1)),
+                    (x + 1 < W, i + 1),
+                    (y > 0, i.wrapping_sub(W)),
+                    (y + 1 < H, i + W),
+                ] {
                     if ok {
                         s += u[i] - u[j];
                     }
@@ -108,7 +125,9 @@ fn closed_form(v: &[u16], alpha: f64, theta: f64, depth: f64) -> Vec<f64> {
         }
         rr = rr2;
     }
-    let (lo, hi) = u.iter().fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    let (lo, hi) = u
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
     u.iter().map(|v| (v - lo) / (hi - lo) * depth).collect()
 }
 
@@ -121,13 +140,30 @@ fn depth_png_matches_the_closed_form() {
     let out = d.join("r.png");
     let (alpha, theta, depth) = (3.0, 5.0, 4.0);
     ok(&run(&[
-        "relief", input.to_str().unwrap(), "-o", out.to_str().unwrap(), "--alpha", "3", "--silhouette", "5", "--depth", "4", "-q",
+        "relief",
+        input.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--alpha",
+        "3",
+        "--silhouette",
+        "5",
+        "--depth",
+        "4",
+        "-q",
     ]));
     let (w, h, got, _) = relief_mm(&out);
     assert_eq!((w, h), (W, H));
     let want = closed_form(&v, alpha, theta, depth);
-    let err = got.iter().zip(&want).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-    eprintln!("max deviation from the closed form: {err:.2e} mm ({:.4}% of the depth)", err / depth * 100.0);
+    let err = got
+        .iter()
+        .zip(&want)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "max deviation from the closed form: {err:.2e} mm ({:.4}% of the depth)",
+        err / depth * 100.0
+    );
     assert!(err < 0.005 * depth, "max deviation {err} mm");
     // the scene really has outlines that were zeroed
     let mut jumps = 0;

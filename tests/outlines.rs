@@ -10,9 +10,19 @@ use relievo::timing::Timings;
 
 fn relief(steps: Option<f64>, res: usize) -> (Grid<f32>, Grid<bool>) {
     let mesh = demo::crossed_tubes(0.0);
-    let cam = Camera { pitch: 20.0, ..Camera::default() };
+    let cam = Camera {
+        pitch: 20.0,
+        ..Camera::default()
+    };
     let dm = render(&mesh, &cam, res, 2);
-    let field = shape_field(&dm, 2, Shaping { alpha: 4.0, threshold: 8.0 });
+    let field = shape_field(
+        &dm,
+        2,
+        Shaping {
+            alpha: 4.0,
+            threshold: 8.0,
+        },
+    );
     assert!(field.silhouette_edges > 100);
     let p = Params {
         depth_mm: 5.0,
@@ -62,9 +72,15 @@ fn steps_bound_every_outline_jump() {
     let (worst, biggest, slope, n) = outline_jumps(&h, &bar, step);
     eprintln!("with steps {step} mm: {n} outline pairs, largest jump {biggest:.4} mm, slope {slope:.4} mm");
     // quantisation of the 16-bit file is 5 mm / 65535 = 8e-5 mm
-    assert!(worst <= 1e-4, "an outline jump exceeds the step plus one sample's slope by {worst} mm");
+    assert!(
+        worst <= 1e-4,
+        "an outline jump exceeds the step plus one sample's slope by {worst} mm"
+    );
     // and the steps are really there
-    assert!(biggest >= 0.4 * step, "largest outline jump {biggest} mm: steps missing");
+    assert!(
+        biggest >= 0.4 * step,
+        "largest outline jump {biggest} mm: steps missing"
+    );
 }
 
 /// Without steps, outlines are flattened to the surfaces' own slopes
@@ -73,7 +89,12 @@ fn steps_bound_every_outline_jump() {
 fn zeroed_silhouettes_leave_no_cliff() {
     let (h, bar) = relief(None, 256);
     let (_, biggest, slope, n) = outline_jumps(&h, &bar, 0.0);
-    eprintln!("without steps: {n} outline pairs, largest jump {biggest:.4} mm, slope {slope:.4} mm");
+    eprintln!(
+        "without steps: {n} outline pairs, largest jump {biggest:.4} mm, slope {slope:.4} mm"
+    );
     // depth jumps of up to the whole scene shrink to under 2% of the relief
-    assert!(biggest <= 0.02 * 5.0, "an outline keeps a cliff of {biggest} mm");
+    assert!(
+        biggest <= 0.02 * 5.0,
+        "an outline keeps a cliff of {biggest} mm"
+    );
 }

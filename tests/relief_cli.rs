@@ -84,6 +84,10 @@ fn resolution_independence() {
         }
     }
     let rms = (sum / (w * h) as f64).sqrt();
+    eprintln!(
+        "256 vs 1024 px: RMS {rms:.4} mm = {:.2}% of the depth",
+        rms / depth * 100.0
+    );
     assert!(rms < 0.03 * depth, "RMS {rms} mm of {depth} mm");
     std::fs::remove_dir_all(d).unwrap();
 }
@@ -227,5 +231,89 @@ fn flat_background_is_flat() {
         .collect();
     assert!(border.iter().all(|&b| b == border[0]), "border not flat");
     assert!(v.iter().any(|&x| x > border[0] + 30000));
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// A normal map and the depth PNG of the same surface give the same relief.
+#[test]
+fn normal_map_matches_depth_png() {
+    let d = scratch("normals");
+    let (w, h) = (96usize, 64usize);
+    let n = w as f64;
+    // a smooth bump, heights in pixels (isotropic with x and y)
+    let z = |x: f64, y: f64| {
+        6.0 * (-((x - 40.0).powi(2) + (y - 30.0).powi(2)) / 300.0).exp() + 0.05 * x
+    };
+    let mut depth = vec![0u16; w * h];
+    let mut rgb = vec![0u8; w * h * 3];
+    for y in 0..h {
+        for x in 0..w {
+            let (fx, fy) = (x as f64, y as f64);
+            depth[y * w + x] = ((0.2 + z(fx, fy) / n) * 65535.0).round() as u16;
+            let (dx, drow) = (
+                z(fx + 0.5, fy) - z(fx - 0.5, fy),
+                z(fx, fy + 0.5) - z(fx, fy - 0.5),
+            );
+            let len = (dx * dx + drow * drow + 1.0).sqrt();
+            // tangent space, +Y up: n = (-dz/dx, +dz/drow, 1) / len
+            for (k, c) in [-dx / len, drow / len, 1.0 / len].into_iter().enumerate() {
+                rgb[(y * w + x) * 3 + k] = ((c + 1.0) / 2.0 * 255.0).round() as u8;
+            }
+        }
+    }
+    write_png16(&d.join("depth.png"), w, h, &depth);
+    image::RgbImage::from_raw(w as u32, h as u32, rgb)
+        .unwrap()
+        .save(d.join("normals.png"))
+        .unwrap();
+    for src in ["depth", "normals"] {
+        let input = d.join(format!("{src}.png"));
+        ok(&run(&[
+            "relief",
+            input.to_str().unwrap(),
+            "-o",
+            d.join(format!("r-{src}.png")).to_str().unwrap(),
+            "--depth",
+            "4",
+            "-q",
+        ]));
+    }
+    let (_, _, a, depth_mm) = relief_mm(&d.join("r-depth.png"));
+    let (_, _, b, _) = relief_mm(&d.join("r-normals.png"));
+    let rms = (a.iter().zip(&b).map(|(x, y)| (x - y).powi(2)).sum::<f64>() / a.len() as f64).sqrt();
+    eprintln!("normal map vs depth PNG: RMS {rms:.4} mm of {depth_mm} mm");
+    assert!(rms < 0.05 * depth_mm, "RMS {rms}");
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// The relief's own binary STL is a valid model to relieve again.
+#[test]
+fn binary_stl_round_trip() {
+    let d = scratch("stl-in");
+    let (r, s) = (d.join("r.png"), d.join("r.stl"));
+    ok(&run(&[
+        "relief",
+        &fixture("spot.obj"),
+        "--resolution",
+        "48",
+        "-o",
+        r.to_str().unwrap(),
+        "--stl",
+        s.to_str().unwrap(),
+        "-q",
+    ]));
+    let bytes = std::fs::read(&s).unwrap();
+    assert!(!bytes.starts_with(b"solid"), "expected a binary STL");
+    ok(&run(&[
+        "relief",
+        s.to_str().unwrap(),
+        "--view",
+        "top",
+        "--resolution",
+        "48",
+        "-o",
+        d.join("again.png").to_str().unwrap(),
+        "-q",
+    ]));
     std::fs::remove_dir_all(d).unwrap();
 }

@@ -126,7 +126,13 @@ fn shape(g: (f32, f32), alpha: f32, threshold: f32) -> [f32; 5] {
     };
     let step = |sil: bool, v: f32| if sil { v.signum() } else { 0.0 };
     let bits = sil_x as u8 | (sil_y as u8) << 1;
-    [rx * f, ry * f, step(sil_x, g.0), step(sil_y, g.1), bits as f32]
+    [
+        rx * f,
+        ry * f,
+        step(sil_x, g.0),
+        step(sil_y, g.1),
+        bits as f32,
+    ]
 }
 
 /// A run of neighbouring silhouette edges of one sign across an outline
@@ -220,98 +226,98 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
         .map_init(
             || (Vec::new(), Vec::new()),
             |(raw, shaped): &mut (Vec<(f32, f32)>, Vec<[f32; 5]>), (b, out)| {
-            let ya = b * BLOCK;
-            let yb = ya + out.gx.len() / w;
-            // shaped source rows fa .. fb, kept in a per-thread buffer
-            let fa = F * ya;
-            let fb = (F * (yb - 1) + A).min(fh);
-            // raw slopes from two rows above (for the outline test and the
-            // barrier below a silhouette edge) to one row below the block
-            let ra = fa.saturating_sub(2);
-            let rb = (fb + 1).min(fh);
-            raw.clear();
-            for fy in ra..rb {
-                raw.extend((0..fw).map(|x| src.slope(x, fy)));
-            }
-            let rawat = |fy: usize, fx: usize| raw[(fy - ra) * fw + fx];
-            let sa = fa.saturating_sub(1);
-            shaped.clear();
-            for fy in sa..fb {
-                for x in 0..fw {
-                    let g = rawat(fy, x);
-                    let mut p = shape(g, alpha, threshold);
-                    if p[2] != 0.0 {
-                        let before = if x > 0 { rawat(fy, x - 1).0 } else { 0.0 };
-                        let after = if x + 1 < fw { rawat(fy, x + 1).0 } else { 0.0 };
-                        if dominated(g.0, before, after, threshold) {
-                            p[2] = 0.0;
-                        }
-                    }
-                    if p[3] != 0.0 {
-                        let before = if fy > 0 { rawat(fy - 1, x).1 } else { 0.0 };
-                        let after = if fy + 1 < rb { rawat(fy + 1, x).1 } else { 0.0 };
-                        if dominated(g.1, before, after, threshold) {
-                            p[3] = 0.0;
-                        }
-                    }
-                    shaped.push(p);
+                let ya = b * BLOCK;
+                let yb = ya + out.gx.len() / w;
+                // shaped source rows fa .. fb, kept in a per-thread buffer
+                let fa = F * ya;
+                let fb = (F * (yb - 1) + A).min(fh);
+                // raw slopes from two rows above (for the outline test and the
+                // barrier below a silhouette edge) to one row below the block
+                let ra = fa.saturating_sub(2);
+                let rb = (fb + 1).min(fh);
+                raw.clear();
+                for fy in ra..rb {
+                    raw.extend((0..fw).map(|x| src.slope(x, fy)));
                 }
-            }
-            let at = |fy: usize, fx: usize| -> [f32; 5] {
-                if fy >= sa && fy < fb && fx < fw {
-                    shaped[(fy - sa) * fw + fx]
-                } else {
-                    [0.0; 5]
-                }
-            };
-            let mut sil = 0usize;
-            for y in ya..yb {
-                let y0 = F * y;
-                for x in 0..w {
-                    let x0 = F * x;
-                    let (mut gx, mut gy, mut sx, mut sy) = (0.0f32, 0.0, 0.0, 0.0);
-                    for (a, wa) in along.iter().enumerate() {
-                        for (c, wc) in across.iter().enumerate() {
-                            let p = at(y0 + c, x0 + a);
-                            gx += wa * wc * p[0];
-                            sx += wa * wc * p[2];
-                            let q = at(y0 + a, x0 + c);
-                            gy += wa * wc * q[1];
-                            sy += wa * wc * q[3];
-                        }
-                    }
-                    let (mut fg, mut barrier, mut best, mut id, mut dsum) =
-                        (false, false, f32::MIN, 0u16, 0.0f32);
-                    for r in 0..F {
-                        for c in 0..F {
-                            let bits = at(y0 + r, x0 + c)[4] as u8;
-                            if bits != 0 {
-                                barrier = true;
-                                sil += (bits & 1) as usize + (bits >> 1) as usize;
-                            }
-                            let (d, i) = (src.depth(x0 + c, y0 + r), src.id(x0 + c, y0 + r));
-                            dsum += d;
-                            if i != 0 && d > best {
-                                best = d;
-                                id = i;
-                                fg = true;
+                let rawat = |fy: usize, fx: usize| raw[(fy - ra) * fw + fx];
+                let sa = fa.saturating_sub(1);
+                shaped.clear();
+                for fy in sa..fb {
+                    for x in 0..fw {
+                        let g = rawat(fy, x);
+                        let mut p = shape(g, alpha, threshold);
+                        if p[2] != 0.0 {
+                            let before = if x > 0 { rawat(fy, x - 1).0 } else { 0.0 };
+                            let after = if x + 1 < fw { rawat(fy, x + 1).0 } else { 0.0 };
+                            if dominated(g.0, before, after, threshold) {
+                                p[2] = 0.0;
                             }
                         }
+                        if p[3] != 0.0 {
+                            let before = if fy > 0 { rawat(fy - 1, x).1 } else { 0.0 };
+                            let after = if fy + 1 < rb { rawat(fy + 1, x).1 } else { 0.0 };
+                            if dominated(g.1, before, after, threshold) {
+                                p[3] = 0.0;
+                            }
+                        }
+                        shaped.push(p);
                     }
-                    // a silhouette edge also bars the pixel on its far side
-                    let x_bit = |r: usize| at(y0 + r, x0 - 1)[4] as u8 & 1 != 0;
-                    let y_bit = |c: usize| y0 > 0 && at(y0 - 1, x0 + c)[4] as u8 & 2 != 0;
-                    if (x0 > 0 && (0..F).any(x_bit)) || (0..F).any(y_bit) {
-                        barrier = true;
-                    }
-                    let k = (y - ya) * w + x;
-                    (out.gx[k], out.gy[k], out.sx[k], out.sy[k]) = (gx, gy, sx, sy);
-                    (out.barrier[k], out.mask[k], out.id[k]) = (barrier, fg, id);
-                    out.depth[k] = dsum / (F * F) as f32;
                 }
-            }
-            sil
-        },
+                let at = |fy: usize, fx: usize| -> [f32; 5] {
+                    if fy >= sa && fy < fb && fx < fw {
+                        shaped[(fy - sa) * fw + fx]
+                    } else {
+                        [0.0; 5]
+                    }
+                };
+                let mut sil = 0usize;
+                for y in ya..yb {
+                    let y0 = F * y;
+                    for x in 0..w {
+                        let x0 = F * x;
+                        let (mut gx, mut gy, mut sx, mut sy) = (0.0f32, 0.0, 0.0, 0.0);
+                        for (a, wa) in along.iter().enumerate() {
+                            for (c, wc) in across.iter().enumerate() {
+                                let p = at(y0 + c, x0 + a);
+                                gx += wa * wc * p[0];
+                                sx += wa * wc * p[2];
+                                let q = at(y0 + a, x0 + c);
+                                gy += wa * wc * q[1];
+                                sy += wa * wc * q[3];
+                            }
+                        }
+                        let (mut fg, mut barrier, mut best, mut id, mut dsum) =
+                            (false, false, f32::MIN, 0u16, 0.0f32);
+                        for r in 0..F {
+                            for c in 0..F {
+                                let bits = at(y0 + r, x0 + c)[4] as u8;
+                                if bits != 0 {
+                                    barrier = true;
+                                    sil += (bits & 1) as usize + (bits >> 1) as usize;
+                                }
+                                let (d, i) = (src.depth(x0 + c, y0 + r), src.id(x0 + c, y0 + r));
+                                dsum += d;
+                                if i != 0 && d > best {
+                                    best = d;
+                                    id = i;
+                                    fg = true;
+                                }
+                            }
+                        }
+                        // a silhouette edge also bars the pixel on its far side
+                        let x_bit = |r: usize| at(y0 + r, x0 - 1)[4] as u8 & 1 != 0;
+                        let y_bit = |c: usize| y0 > 0 && at(y0 - 1, x0 + c)[4] as u8 & 2 != 0;
+                        if (x0 > 0 && (0..F).any(x_bit)) || (0..F).any(y_bit) {
+                            barrier = true;
+                        }
+                        let k = (y - ya) * w + x;
+                        (out.gx[k], out.gy[k], out.sx[k], out.sy[k]) = (gx, gy, sx, sy);
+                        (out.barrier[k], out.mask[k], out.id[k]) = (barrier, fg, id);
+                        out.depth[k] = dsum / (F * F) as f32;
+                    }
+                }
+                sil
+            },
         )
         .sum();
     f

@@ -58,6 +58,7 @@ pub fn load_png(path: &Path) -> Result<ImageModel> {
     }
     // Normal map: n = 2c - 1; slope = -n_xy / n_z in image-width units (the
     // surface is taken as isotropic: depth measured in pixels like x and y).
+    let rgba = img.into_rgba16();
     let mut gx = Grid::new(w, h, 0.0f32);
     let mut gy = Grid::new(w, h, 0.0f32);
     let mut mask = Grid::new(w, h, false);

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Relief benchmarks (release mode). Needs ../shared/models beside the
+# checkout; the numpy comparison needs python3 with numpy, scipy, pillow.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+cargo build --release -q
+R=target/release/relievo
+M=../shared/models
+T=$(mktemp -d)
+trap 'rm -rf "$T"' EXIT
+wall() { /usr/bin/time -f "  wall %e s, peak RSS %M KB" "$@"; }
+
+echo "== bunny (69451 triangles), 1024 px"
+wall $R -v relief $M/stanford-bunny.obj --resolution 1024 -o "$T/b1k.png"
+echo "== bunny, 4096 px"
+wall $R -v relief $M/stanford-bunny.obj --resolution 4096 -o "$T/b4k.png"
+echo "== 2048 px depth PNG (the bunny's depth buffer), relievo vs numpy+scipy"
+$R -q relief $M/stanford-bunny.obj --resolution 2048 -o "$T/x.png" --depth-out "$T/depth2k.png"
+wall $R -v relief "$T/depth2k.png" -o "$T/r2k.png" --alpha 4 --silhouette 8 --depth 5
+if python3 -c 'import numpy, scipy, PIL' 2>/dev/null; then
+  wall python3 bench/numpy_relief.py "$T/depth2k.png" "$T/n2k.png" 4 8 5
+else
+  echo "  (numpy/scipy/pillow missing: pip install numpy scipy pillow)"
+fi
