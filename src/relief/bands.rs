@@ -25,28 +25,22 @@ fn filter_rows(v: &mut Grid<f32>, barrier: &Grid<bool>, a: f32) {
         .par_chunks_mut(w)
         .zip(barrier.data.par_chunks(w))
         .for_each(|(row, bar)| {
-            let mut prev: Option<f32> = None;
-            for i in 0..w {
-                if bar[i] {
-                    prev = None;
-                    continue;
+            // forward then backward; the state stops at barrier pixels
+            let mut pass = |order: &mut dyn Iterator<Item = usize>| {
+                let mut prev: Option<f32> = None;
+                for i in order {
+                    if bar[i] {
+                        prev = None;
+                        continue;
+                    }
+                    if let Some(p) = prev {
+                        row[i] += a * (p - row[i]);
+                    }
+                    prev = Some(row[i]);
                 }
-                if let Some(p) = prev {
-                    row[i] += a * (p - row[i]);
-                }
-                prev = Some(row[i]);
-            }
-            prev = None;
-            for i in (0..w).rev() {
-                if bar[i] {
-                    prev = None;
-                    continue;
-                }
-                if let Some(p) = prev {
-                    row[i] += a * (p - row[i]);
-                }
-                prev = Some(row[i]);
-            }
+            };
+            pass(&mut (0..w));
+            pass(&mut (0..w).rev());
         });
 }
 

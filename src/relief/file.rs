@@ -80,20 +80,33 @@ pub fn encode_relief(r: &Relief, params: serde_json::Value) -> (Vec<u8>, Vec<u8>
     (png, json)
 }
 
+/// Largest image accepted (pixels), to fail clearly rather than run out of memory.
+pub const MAX_PIXELS: usize = 1 << 26;
+
+/// Decode an image, refusing sizes outside 2 x 2 .. MAX_PIXELS first (from
+/// the header alone).
+pub fn decode(path: &Path) -> Result<image::DynamicImage> {
+    let what = path.display().to_string();
+    let open = || {
+        image::ImageReader::open(path)
+            .ctx(&what)?
+            .with_guessed_format()
+            .ctx(&what)
+    };
+    let (w, h) = open()?.into_dimensions().ctx(&what)?;
+    let (w, h) = (w as usize, h as usize);
+    if w < 2 || h < 2 || w * h > MAX_PIXELS {
+        bail!(
+            "{what}: image of {w} x {h} pixels is out of range (2 x 2 up to {MAX_PIXELS} pixels)"
+        );
+    }
+    open()?.decode().ctx(&what)
+}
+
 /// A grayscale PNG as values in [0, 1] (8 or 16 bit).
 pub fn read_gray(path: &Path) -> Result<Grid<f32>> {
-    let what = path.display().to_string();
-    let img = image::ImageReader::open(path)
-        .ctx(&what)?
-        .with_guessed_format()
-        .ctx(&what)?
-        .decode()
-        .ctx(&what)?;
-    let g = img.to_luma16();
+    let g = decode(path)?.into_luma16();
     let (w, h) = (g.width() as usize, g.height() as usize);
-    if w == 0 || h == 0 {
-        bail!("{what}: empty image");
-    }
     Ok(Grid::from_vec(
         w,
         h,

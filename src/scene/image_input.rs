@@ -2,9 +2,9 @@
 //! an RGB normal map (tangent space, +Y up) becomes a slope field.
 
 use super::raster::DepthMap;
-use crate::bail;
-use crate::error::{Context, Result};
+use crate::error::Result;
 use crate::grid::Grid;
+use crate::relief::file::decode;
 use crate::relief::gradient::SlopeSource;
 use std::path::Path;
 
@@ -13,33 +13,17 @@ pub enum ImageModel {
     Slopes(SlopeSource),
 }
 
-/// Largest image accepted (pixels), to fail clearly rather than run out of memory.
-pub const MAX_PIXELS: usize = 1 << 26;
-
 pub fn load_png(path: &Path) -> Result<ImageModel> {
-    let what = path.display().to_string();
-    let reader = image::ImageReader::open(path)
-        .ctx(&what)?
-        .with_guessed_format()
-        .ctx(&what)?;
-    let (w, h) = reader.into_dimensions().ctx(&what)?;
-    let (w, h) = (w as usize, h as usize);
-    if w < 2 || h < 2 || w * h > MAX_PIXELS {
-        bail!(
-            "{what}: image of {w} x {h} pixels is out of range (2 x 2 up to {MAX_PIXELS} pixels)"
-        );
-    }
-    let img = image::ImageReader::open(path)
-        .ctx(&what)?
-        .with_guessed_format()
-        .ctx(&what)?
-        .decode()
-        .ctx(&what)?;
-    let rgba = img.to_rgba16();
-    let gray = !img.color().has_color() || rgba.pixels().all(|p| p[0] == p[1] && p[1] == p[2]);
+    let img = decode(path)?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let gray = !img.color().has_color()
+        || img
+            .to_rgb16()
+            .pixels()
+            .all(|p| p[0] == p[1] && p[1] == p[2]);
     if gray {
         let h_data: Vec<f32> = img
-            .to_luma16()
+            .into_luma16()
             .into_raw()
             .into_iter()
             .map(|v| v as f32 / 65535.0)
