@@ -15,3 +15,8 @@ pub mod timing;
 
 pub use error::{Error, Result};
 pub use grid::Grid;
+pub mod gcode;
+pub mod machine;
+pub mod sim;
+pub mod simulate;
+pub mod tool;

@@ -31,6 +31,71 @@ enum Cmd {
     /// Make a bas-relief from a 3D model (OBJ, STL), a depth PNG or a
     /// normal-map PNG; without MODEL, from the built-in demo scene.
     Relief(ReliefArgs),
+    /// Simulate a G-code job cutting the stock and judge it against a relief.
+    Simulate(SimulateArgs),
+}
+
+#[derive(Args)]
+struct SimulateArgs {
+    /// G-code job (GRBL 1.1 dialect).
+    job: PathBuf,
+    /// Target relief PNG (its JSON sidecar gives the size).
+    #[arg(long)]
+    relief: PathBuf,
+    /// Relief width in mm, for a heightmap without sidecar.
+    #[arg(long, allow_negative_numbers = true)]
+    width: Option<f64>,
+    /// Relief depth in mm, for a heightmap without sidecar.
+    #[arg(long, allow_negative_numbers = true)]
+    depth: Option<f64>,
+    /// ball:D, flat:D, taperball:TIP_RADIUS:HALF_ANGLE[:D], vbit:ANGLE[:D] [default: the job's (tool: ..) comment].
+    #[arg(long)]
+    tool: Option<String>,
+    /// Stock WIDTHxHEIGHTxTHICKNESS in mm, from the origin [default: the relief's panel, depth + 3 mm thick].
+    #[arg(long, value_parser = parse_stock)]
+    stock: Option<(f64, f64, f64)>,
+    /// Stock cells per relief pixel along each axis.
+    #[arg(long, default_value_t = 1)]
+    oversample: usize,
+    /// Machine profile: grbl-generic, 3018, shapeoko, or a TOML file.
+    #[arg(long, default_value = "grbl-generic")]
+    machine: String,
+    /// Job coordinates X,Y of the travel box's lower-left corner.
+    #[arg(long, value_parser = parse_pair, default_value = "0,0", allow_negative_numbers = true)]
+    travel_origin: (f64, f64),
+    /// Cut surface as a relief PNG (+ JSON sidecar).
+    #[arg(short, long, default_value = "cut.png")]
+    output: PathBuf,
+    /// Report as JSON.
+    #[arg(long)]
+    report: Option<PathBuf>,
+    /// Deviation map PNG: red = gouge, blue = residual.
+    #[arg(long)]
+    deviation: Option<PathBuf>,
+}
+
+fn parse_stock(s: &str) -> Result<(f64, f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(['x', 'X'])
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}': expected WxHxT in mm"))?;
+    match v[..] {
+        [a, b, c] => Ok((a, b, c)),
+        _ => Err(format!("'{s}': expected WxHxT in mm")),
+    }
+}
+
+fn parse_pair(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}': expected X,Y"))?;
+    match v[..] {
+        [a, b] => Ok((a, b)),
+        _ => Err(format!("'{s}': expected X,Y")),
+    }
 }
 
 #[derive(Args)]
@@ -167,6 +232,7 @@ fn spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
 
 fn run(cli: Cli) -> relievo::Result<()> {
     match cli.cmd {
+        Cmd::Simulate(args) => simulate(args, cli.quiet, cli.verbose),
         Cmd::Relief(args) => {
             let job = args.job();
             let pb = spinner(cli.quiet);
@@ -203,6 +269,49 @@ fn run(cli: Cli) -> relievo::Result<()> {
             Ok(())
         }
     }
+}
+
+fn simulate(args: SimulateArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
+    let job = relievo::simulate::SimulateJob {
+        job: args.job,
+        relief: args.relief,
+        relief_width: args.width,
+        relief_depth: args.depth,
+        tool: args.tool,
+        stock: args.stock,
+        oversample: args.oversample,
+        machine: args.machine,
+        travel_origin: args.travel_origin,
+        output: args.output,
+        report: args.report,
+        deviation: args.deviation,
+    };
+    let pb = spinner(quiet);
+    if let Some(pb) = &pb {
+        pb.set_message("simulating");
+    }
+    let res = job.run();
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
+    let s = res?;
+    if !quiet {
+        eprintln!(
+            "simulated {} on {} x {} cells\n{}",
+            s.tool.spec(),
+            s.cells.0,
+            s.cells.1,
+            s.report.summary()
+        );
+    }
+    if verbose {
+        eprintln!(
+            "stage timings ({} threads):\n{}",
+            rayon::current_num_threads(),
+            s.timings.report()
+        );
+    }
+    Ok(())
 }
 
 fn main() -> ExitCode {

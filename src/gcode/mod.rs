@@ -1,0 +1,266 @@
+//! G-code in the GRBL 1.1 dialect: the parser shared by the simulator and
+//! the sender, and the modal interpreter that turns a program into straight
+//! tool moves (arcs become chords within 0.1 micrometre).
+
+pub mod parse;
+
+use crate::bail;
+use crate::error::Result;
+use glam::DVec3;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    Rapid,
+    Feed,
+}
+
+/// A straight move of the tool tip.
+#[derive(Clone, Copy, Debug)]
+pub struct Segment {
+    /// 1-based line of the job it comes from.
+    pub line: usize,
+    pub kind: Kind,
+    pub a: DVec3,
+    pub b: DVec3,
+    /// mm/min for feed moves; ignored for rapids.
+    pub feed: f64,
+    /// The machine comes to a stop before this move (dwell, pause, spindle).
+    pub stop_before: bool,
+}
+
+/// A program reduced to moves.
+#[derive(Debug, Default)]
+pub struct Program {
+    pub segments: Vec<Segment>,
+    /// Seconds of G4 dwell.
+    pub dwell_s: f64,
+    /// Lines in the file.
+    pub lines: usize,
+    /// Tool spec from a `(tool: SPEC ...)` header comment, if any.
+    pub tool: Option<String>,
+}
+
+/// Largest chord error when arcs are broken into straight moves (mm).
+pub const ARC_TOLERANCE: f64 = 1e-4;
+
+/// Interpret `text`. Errors name the line.
+pub fn program(text: &str) -> Result<Program> {
+    let lines = parse::parse(text)?;
+    let max_z = lines
+        .iter()
+        .flat_map(|l| l.words.iter())
+        .filter(|w| w.0 == 'Z')
+        .map(|w| w.1)
+        .fold(0.0f64, f64::max);
+    let mut p = Program {
+        lines: lines.len(),
+        ..Default::default()
+    };
+    let mut pos = DVec3::new(0.0, 0.0, max_z);
+    let (mut motion, mut absolute, mut scale, mut feed) = (0u8, true, 1.0f64, None::<f64>);
+    let mut stop = true;
+    for l in &lines {
+        if p.tool.is_none() {
+            for c in &l.comments {
+                let lower = c.to_ascii_lowercase();
+                if let Some(rest) = lower
+                    .strip_prefix("tool:")
+                    .or_else(|| lower.strip_prefix("tool "))
+                {
+                    p.tool = rest.split_whitespace().next().map(str::to_string);
+                }
+            }
+        }
+        let n = l.number;
+        let get = |c: char| l.words.iter().rev().find(|w| w.0 == c).map(|w| w.1);
+        let mut dwell = false;
+        let mut new_motion = None;
+        for &(c, v) in &l.words {
+            match (c, v as i32) {
+                ('G', 0..=3) => new_motion = Some(v as u8),
+                ('G', 4) => dwell = true,
+                ('G', 20) => scale = 25.4,
+                ('G', 21) => scale = 1.0,
+                ('G', 90) => absolute = true,
+                ('G', 91) => absolute = false,
+                ('M', _) => stop = true,
+                _ => {}
+            }
+        }
+        if let Some(f) = get('F') {
+            if f <= 0.0 {
+                bail!("line {n}: feed rate F{f} must be positive");
+            }
+            feed = Some(f * scale);
+        }
+        if dwell {
+            let Some(s) = get('P') else {
+                bail!("line {n}: G4 needs a P word (seconds)")
+            };
+            if s < 0.0 {
+                bail!("line {n}: negative dwell P{s}");
+            }
+            p.dwell_s += s;
+            stop = true;
+            continue;
+        }
+        if let Some(m) = new_motion {
+            motion = m;
+        }
+        let axes = ['X', 'Y', 'Z'].map(get);
+        if axes.iter().all(Option::is_none) {
+            if new_motion.is_some_and(|m| m >= 2) {
+                bail!("line {n}: arc without an end point");
+            }
+            continue;
+        }
+        let mut target = pos;
+        for (k, v) in axes.iter().enumerate() {
+            if let Some(v) = v {
+                target[k] = if absolute {
+                    v * scale
+                } else {
+                    pos[k] + v * scale
+                };
+            }
+        }
+        let kind = if motion == 0 { Kind::Rapid } else { Kind::Feed };
+        let f = match (kind, feed) {
+            (Kind::Rapid, _) => 0.0,
+            (Kind::Feed, Some(f)) => f,
+            (Kind::Feed, None) => bail!("line {n}: feed move with no feed rate set (F)"),
+        };
+        let mut push = |a: DVec3, b: DVec3, stop_before: &mut bool| {
+            p.segments.push(Segment {
+                line: n,
+                kind,
+                a,
+                b,
+                feed: f,
+                stop_before: *stop_before,
+            });
+            *stop_before = false;
+        };
+        if motion >= 2 {
+            for (a, b) in arc(
+                pos,
+                target,
+                motion == 2,
+                get('I').map(|v| v * scale),
+                get('J').map(|v| v * scale),
+                get('R').map(|v| v * scale),
+                n,
+            )? {
+                push(a, b, &mut stop);
+            }
+        } else if target != pos {
+            push(pos, target, &mut stop);
+        }
+        pos = target;
+    }
+    Ok(p)
+}
+
+/// Chords of an XY arc (helical in Z), clockwise for G2.
+fn arc(
+    a: DVec3,
+    b: DVec3,
+    cw: bool,
+    i: Option<f64>,
+    j: Option<f64>,
+    r: Option<f64>,
+    n: usize,
+) -> Result<Vec<(DVec3, DVec3)>> {
+    let (dx, dy) = (b.x - a.x, b.y - a.y);
+    let centre = match (i, j, r) {
+        (_, _, Some(r)) if i.is_none() && j.is_none() => {
+            // GRBL: positive R = the short arc, negative = the long one
+            let d = (dx * dx + dy * dy).sqrt();
+            if d == 0.0 {
+                bail!("line {n}: R arc with the same start and end point");
+            }
+            let h2 = r * r - d * d / 4.0;
+            if h2 < -(0.005f64.powi(2)) - 1e-9 {
+                bail!(
+                    "line {n}: arc radius R{r} is smaller than half the distance to the end point"
+                );
+            }
+            let h = h2.max(0.0).sqrt();
+            // centre lies to the right of a->b for a clockwise short arc
+            let side = if cw == (r > 0.0) { -1.0 } else { 1.0 };
+            let (mx, my) = (a.x + dx / 2.0, a.y + dy / 2.0);
+            (mx - side * h * dy / d, my + side * h * dx / d)
+        }
+        (None, None, _) => bail!("line {n}: arc needs I/J or R"),
+        (_, _, Some(_)) => bail!("line {n}: arc with both I/J and R"),
+        _ => (a.x + i.unwrap_or(0.0), a.y + j.unwrap_or(0.0)),
+    };
+    let (cx, cy) = centre;
+    let r0 = ((a.x - cx).powi(2) + (a.y - cy).powi(2)).sqrt();
+    let r1 = ((b.x - cx).powi(2) + (b.y - cy).powi(2)).sqrt();
+    if (r0 - r1).abs() > 0.005 + 0.001 * r0 || r0 == 0.0 {
+        bail!("line {n}: arc end point is not on the circle (radius {r0:.4} at the start, {r1:.4} at the end)");
+    }
+    let t0 = (a.y - cy).atan2(a.x - cx);
+    let t1 = (b.y - cy).atan2(b.x - cx);
+    let tau = std::f64::consts::TAU;
+    let mut sweep = if cw { t0 - t1 } else { t1 - t0 };
+    if sweep <= 1e-12 {
+        sweep += tau;
+    }
+    let step = 2.0 * (1.0 - ARC_TOLERANCE / r0).clamp(-1.0, 1.0).acos();
+    let k = ((sweep / step.max(1e-6)).ceil() as usize).clamp(1, 1_000_000);
+    let sign = if cw { -1.0 } else { 1.0 };
+    let pt = |s: usize| {
+        if s == k {
+            return b;
+        }
+        let f = s as f64 / k as f64;
+        let t = t0 + sign * sweep * f;
+        let rr = r0 + (r1 - r0) * f;
+        DVec3::new(cx + rr * t.cos(), cy + rr * t.sin(), a.z + (b.z - a.z) * f)
+    };
+    Ok((0..k).map(|s| (pt(s), pt(s + 1))).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn modal_state_units_and_increments() {
+        let p = program(
+            "(tool: ball:3.175 finishing)\nG21 G90\nG0 X1 Z5\nG1 X10 F600\nG91 Y5\nG20 G90 G1 X1\n",
+        )
+        .unwrap();
+        assert_eq!(p.tool.as_deref(), Some("ball:3.175"));
+        let s = &p.segments;
+        assert_eq!(s[0].kind, Kind::Rapid);
+        assert_eq!(s[1].b, DVec3::new(10.0, 0.0, 5.0));
+        assert_eq!(s[2].b, DVec3::new(10.0, 5.0, 5.0));
+        assert!((s[3].b.x - 25.4).abs() < 1e-12 && s[3].feed == 600.0);
+    }
+
+    #[test]
+    fn arcs_with_ij_and_r_agree() {
+        let ij = program("G0 X10 Y0 Z0\nG2 X0 Y-10 I-10 J0 F100\n").unwrap();
+        let r = program("G0 X10 Y0 Z0\nG2 X0 Y-10 R10 F100\n").unwrap();
+        for p in [&ij, &r] {
+            for s in &p.segments[1..] {
+                let m = (s.a + s.b) / 2.0;
+                // chord midpoints stay within the tolerance of the circle
+                assert!((10.0 - m.truncate().length()) <= ARC_TOLERANCE + 1e-9);
+                assert!(
+                    s.b.y <= 1e-9 && s.b.x >= -1e-9,
+                    "clockwise quarter from +x to -y"
+                );
+            }
+        }
+        assert_eq!(ij.segments.len(), r.segments.len());
+        assert!(program("G2 X10 Y0 I1 J0 F100\n")
+            .unwrap_err()
+            .0
+            .contains("line 1"));
+        assert!(program("G1 X1\n").unwrap_err().0.contains("feed"));
+    }
+}

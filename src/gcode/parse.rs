@@ -1,0 +1,146 @@
+//! One G-code reader for the simulator and the sender: words, comments and
+//! line numbers of the GRBL 1.1 subset relievo speaks, any case and spacing.
+
+use crate::bail;
+use crate::error::Result;
+
+/// One parsed line: its 1-based line number in the file and its words.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Line {
+    pub number: usize,
+    pub words: Vec<(char, f64)>,
+    /// Text of the comments on the line (without delimiters).
+    pub comments: Vec<String>,
+}
+
+const G_CODES: [f64; 11] = [0.0, 1.0, 2.0, 3.0, 4.0, 17.0, 20.0, 21.0, 90.0, 91.0, 94.0];
+const M_CODES: [f64; 7] = [0.0, 2.0, 3.0, 4.0, 5.0, 30.0, 1.0];
+
+/// Remove comments and whitespace: what GRBL's line buffer will hold.
+pub fn strip(line: &str) -> String {
+    let mut out = String::with_capacity(line.len());
+    let mut depth = 0;
+    for c in line.chars() {
+        match c {
+            '(' => depth += 1,
+            ')' if depth > 0 => depth -= 1,
+            ';' if depth == 0 => break,
+            c if depth == 0 && !c.is_whitespace() => out.push(c.to_ascii_uppercase()),
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Parse one line (`number` only names it in errors).
+pub fn parse_line(text: &str, number: usize) -> Result<Line> {
+    let mut words = Vec::new();
+    let mut comments = Vec::new();
+    let chars: Vec<char> = text.chars().collect();
+    let mut i = 0;
+    while i < chars.len() {
+        let c = chars[i];
+        if c == '(' {
+            let end = chars[i..].iter().position(|&d| d == ')');
+            let Some(end) = end else {
+                bail!("line {number}: comment '(' is not closed")
+            };
+            comments.push(
+                chars[i + 1..i + end]
+                    .iter()
+                    .collect::<String>()
+                    .trim()
+                    .to_string(),
+            );
+            i += end + 1;
+            continue;
+        }
+        if c == ';' {
+            comments.push(chars[i + 1..].iter().collect::<String>().trim().to_string());
+            break;
+        }
+        if c.is_whitespace() || (c == '%' && words.is_empty()) {
+            i += 1;
+            continue;
+        }
+        let letter = c.to_ascii_uppercase();
+        if !letter.is_ascii_alphabetic() {
+            bail!(
+                "line {number}: unexpected character '{c}' in '{}'",
+                text.trim()
+            );
+        }
+        i += 1;
+        let mut num = String::new();
+        while i < chars.len()
+            && (chars[i].is_ascii_digit() || matches!(chars[i], '.' | '-' | '+' | ' ' | '\t'))
+        {
+            if !chars[i].is_whitespace() {
+                num.push(chars[i]);
+            }
+            i += 1;
+        }
+        let value: f64 = match num.parse() {
+            Ok(v) if f64::is_finite(v) => v,
+            _ => bail!(
+                "line {number}: word '{letter}' has no valid number in '{}'",
+                text.trim()
+            ),
+        };
+        match letter {
+            'G' if !G_CODES.contains(&value) => bail!("line {number}: unsupported command G{num}"),
+            'M' if !M_CODES.contains(&value) => bail!("line {number}: unsupported command M{num}"),
+            'G' | 'M' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'N' => {}
+            _ => bail!("line {number}: unsupported word '{letter}{num}'"),
+        }
+        words.push((letter, value));
+    }
+    Ok(Line {
+        number,
+        words,
+        comments,
+    })
+}
+
+/// Parse a whole program; the first bad line is the error.
+pub fn parse(text: &str) -> Result<Vec<Line>> {
+    text.lines()
+        .enumerate()
+        .map(|(k, l)| parse_line(l, k + 1))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn words_comments_case_and_spacing() {
+        let l = parse_line("n10 g1x1.5 Y -2 (cut) z-0.25 F 600 ; tail", 3).unwrap();
+        assert_eq!(
+            l.words,
+            vec![
+                ('N', 10.0),
+                ('G', 1.0),
+                ('X', 1.5),
+                ('Y', -2.0),
+                ('Z', -0.25),
+                ('F', 600.0)
+            ]
+        );
+        assert_eq!(l.comments, vec!["cut", "tail"]);
+        assert_eq!(strip("G1 X1 (a b) Y2 ; c"), "G1X1Y2");
+    }
+
+    #[test]
+    fn errors_name_the_line() {
+        assert!(parse("G1 X1\nG1 Q5\n").unwrap_err().0.contains("line 2"));
+        assert!(parse("G1 X1\n\nG38.2 Z-5\n")
+            .unwrap_err()
+            .0
+            .contains("line 3"));
+        assert!(parse("G1 X(oops\n").unwrap_err().0.contains("line 1"));
+        assert!(parse("G1 X--1\n").unwrap_err().0.contains("line 1"));
+        assert!(parse("M7\n").unwrap_err().0.contains("M7"));
+    }
+}

@@ -1,0 +1,91 @@
+//! Machine profiles (machines/*.toml, the shipped ones compiled in): travel,
+//! rates, accelerations, spindle range, receive buffer.
+
+use crate::bail;
+use crate::error::{Context, Result};
+use serde::Deserialize;
+use std::path::Path;
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+pub struct Axes {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+}
+
+impl Axes {
+    pub fn get(&self, k: usize) -> f64 {
+        [self.x, self.y, self.z][k]
+    }
+}
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq)]
+pub struct Spindle {
+    pub min: f64,
+    pub max: f64,
+}
+
+#[derive(Deserialize, Debug, Clone, PartialEq)]
+pub struct Machine {
+    pub name: String,
+    pub dialect: String,
+    pub rx_buffer: usize,
+    /// GRBL's junction deviation ($11), mm.
+    pub junction_deviation: f64,
+    /// Travel per axis, mm.
+    pub travel: Axes,
+    /// Maximum rate per axis, mm/min.
+    pub max_rate: Axes,
+    /// Acceleration per axis, mm/s^2.
+    pub acceleration: Axes,
+    pub spindle: Spindle,
+}
+
+const BUILTIN: [(&str, &str); 3] = [
+    (
+        "grbl-generic",
+        include_str!("../machines/grbl-generic.toml"),
+    ),
+    ("3018", include_str!("../machines/3018.toml")),
+    ("shapeoko", include_str!("../machines/shapeoko.toml")),
+];
+
+impl Machine {
+    /// A shipped profile by name, or a TOML file by path.
+    pub fn load(name_or_path: &str) -> Result<Machine> {
+        let m: Machine = if let Some((_, text)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
+            toml::from_str(text).ctx(format!("machines/{name_or_path}.toml"))?
+        } else if Path::new(name_or_path).is_file() {
+            let text = std::fs::read_to_string(name_or_path).ctx(name_or_path)?;
+            toml::from_str(&text).ctx(name_or_path)?
+        } else {
+            let names: Vec<&str> = BUILTIN.iter().map(|b| b.0).collect();
+            bail!(
+                "--machine {name_or_path}: no such profile or file; shipped: {}",
+                names.join(", ")
+            );
+        };
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        for k in 0..3 {
+            if !pos(m.travel.get(k)) || !pos(m.max_rate.get(k)) || !pos(m.acceleration.get(k)) {
+                bail!("{name_or_path}: travel, max_rate and acceleration must be positive on every axis");
+            }
+        }
+        if !pos(m.junction_deviation) || m.rx_buffer < 16 {
+            bail!("{name_or_path}: junction_deviation must be positive and rx_buffer at least 16");
+        }
+        Ok(m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn shipped_profiles_load() {
+        for n in ["grbl-generic", "3018", "shapeoko"] {
+            let m = super::Machine::load(n).unwrap();
+            assert_eq!(m.rx_buffer, 128);
+        }
+        assert!(super::Machine::load("nonesuch").is_err());
+    }
+}

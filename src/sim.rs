@@ -1,0 +1,609 @@
+//! Stage 5: material-removal simulation of any G-code of the dialect,
+//! judged against a relief (DESIGN.md section 7).
+//!
+//! The stock is a heightfield (top Z per cell). Every straight move sweeps
+//! the tool exactly: for each cell within the tool's radius of the move,
+//! the lowest point of the swept tool surface above that cell is found in
+//! closed form (ball: capsule of the ball centre's path; flat: the disc's
+//! interval on the move; V-bit: the stationary point of a convex function)
+//! or, for the tapered ball, by golden-section search of the same convex
+//! function. Min is order-free, so the stock is cut in parallel row bands,
+//! each band taking its moves in job order (which keeps the test of rapids
+//! against the stock as it was at that moment exact).
+
+use crate::gcode::{Kind, Program, Segment};
+use crate::grid::Grid;
+use crate::machine::Machine;
+use crate::relief::Relief;
+use crate::tool::Tool;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// The block of material and its sampling.
+#[derive(Clone, Copy, Debug)]
+pub struct Stock {
+    /// Lower-left corner (mm) and size.
+    pub x0: f64,
+    pub y0: f64,
+    pub width: f64,
+    pub height: f64,
+    /// Top at Z = 0, bottom at Z = -thickness.
+    pub thickness: f64,
+    /// Cell size (mm).
+    pub pitch: f64,
+}
+
+impl Stock {
+    pub fn cells(&self) -> (usize, usize) {
+        (
+            (self.width / self.pitch).round().max(1.0) as usize,
+            (self.height / self.pitch).round().max(1.0) as usize,
+        )
+    }
+    /// Centre of cell (i, j); row 0 is the top edge (largest Y).
+    pub fn centre(&self, i: usize, j: usize) -> (f64, f64) {
+        (
+            self.x0 + (i as f64 + 0.5) * self.pitch,
+            self.y0 + self.height - (j as f64 + 0.5) * self.pitch,
+        )
+    }
+}
+
+/// What the simulation found (DESIGN.md section 7 keys).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Report {
+    pub max_gouge_mm: f64,
+    pub max_residual_mm: f64,
+    pub mean_residual_mm: f64,
+    pub removed_mm3: f64,
+    pub rapids_in_stock: Vec<usize>,
+    pub out_of_travel: Vec<usize>,
+    pub time_s: f64,
+    pub lines: usize,
+}
+
+impl Report {
+    pub fn summary(&self) -> String {
+        let list = |v: &[usize]| {
+            if v.is_empty() {
+                "none".to_string()
+            } else {
+                let shown: Vec<String> = v.iter().take(10).map(|n| n.to_string()).collect();
+                format!(
+                    "{} (lines {}{})",
+                    v.len(),
+                    shown.join(", "),
+                    if v.len() > 10 { ", ..." } else { "" }
+                )
+            }
+        };
+        format!(
+            "max gouge {:.4} mm, residual max {:.4} / mean {:.4} mm, removed {:.1} mm3\nrapids in stock: {}\nout of travel: {}\nestimated time {} ({} lines)",
+            self.max_gouge_mm,
+            self.max_residual_mm,
+            self.mean_residual_mm,
+            self.removed_mm3,
+            list(&self.rapids_in_stock),
+            list(&self.out_of_travel),
+            hms(self.time_s),
+            self.lines
+        )
+    }
+}
+
+/// 1h 02m 03s style.
+pub fn hms(s: f64) -> String {
+    let t = s.round() as u64;
+    if t >= 3600 {
+        format!("{}h {:02}m {:02}s", t / 3600, t / 60 % 60, t % 60)
+    } else {
+        format!("{}m {:02}s", t / 60, t % 60)
+    }
+}
+
+/// Rows per parallel band.
+const BAND: usize = 16;
+/// A rapid "touches" stock when it would cut deeper than this (mm).
+const TOUCH: f64 = 1e-4;
+
+/// The lowest point of the swept tool surface over a cell at offset w from
+/// the move's start (XY), or +inf when the tool does not reach it.
+struct Sweep {
+    a: DVec3,
+    d: DVec3,
+    /// |d_xy|^2
+    axy: f64,
+    r: f64,
+    tool: Tool,
+}
+
+impl Sweep {
+    fn new(s: &Segment, tool: Tool) -> Sweep {
+        let d = s.b - s.a;
+        Sweep {
+            a: s.a,
+            d,
+            axy: d.x * d.x + d.y * d.y,
+            r: tool.radius(),
+            tool,
+        }
+    }
+
+    /// Parameter interval of the move over which the cell is within the
+    /// tool's radius (None when never).
+    #[inline]
+    fn interval(&self, wx: f64, wy: f64) -> Option<(f64, f64)> {
+        let w2 = wx * wx + wy * wy;
+        let r2 = self.r * self.r;
+        if self.axy < 1e-18 {
+            return (w2 <= r2).then_some((0.0, 1.0));
+        }
+        let b = wx * self.d.x + wy * self.d.y;
+        let disc = b * b - self.axy * (w2 - r2);
+        if disc < 0.0 {
+            return None;
+        }
+        let s = disc.sqrt();
+        let (lo, hi) = (((b - s) / self.axy).max(0.0), ((b + s) / self.axy).min(1.0));
+        (lo <= hi).then_some((lo, hi))
+    }
+
+    #[inline]
+    fn rho(&self, wx: f64, wy: f64, t: f64) -> f64 {
+        let (x, y) = (wx - t * self.d.x, wy - t * self.d.y);
+        (x * x + y * y).sqrt()
+    }
+
+    #[inline]
+    fn lowest(&self, wx: f64, wy: f64) -> f64 {
+        let (a, d, r) = (self.a, self.d, self.r);
+        match self.tool {
+            Tool::Ball { .. } => {
+                let r2 = r * r;
+                let sphere = |x: f64, y: f64, z: f64| {
+                    let q = x * x + y * y;
+                    if q <= r2 {
+                        z + r - (r2 - q).sqrt()
+                    } else {
+                        f64::INFINITY
+                    }
+                };
+                let mut z = sphere(wx, wy, a.z).min(sphere(wx - d.x, wy - d.y, a.z + d.z));
+                let len = d.length();
+                if len > 0.0 {
+                    let u = d / len;
+                    let aa = 1.0 - u.z * u.z;
+                    if aa > 1e-12 {
+                        let wu = wx * u.x + wy * u.y;
+                        let bb = -u.z * wu;
+                        let cc = wx * wx + wy * wy - wu * wu - r2;
+                        let disc = bb * bb - aa * cc;
+                        if disc >= 0.0 {
+                            let zp = (-bb - disc.sqrt()) / aa;
+                            let s = (wu + zp * u.z) / len;
+                            if (0.0..=1.0).contains(&s) {
+                                z = z.min(a.z + r + zp);
+                            }
+                        }
+                    }
+                }
+                z
+            }
+            Tool::Flat { .. } => match self.interval(wx, wy) {
+                Some((lo, hi)) => a.z + d.z * if d.z < 0.0 { hi } else { lo },
+                None => f64::INFINITY,
+            },
+            Tool::VBit { angle, .. } => {
+                let Some((lo, hi)) = self.interval(wx, wy) else {
+                    return f64::INFINITY;
+                };
+                let k = 1.0 / (angle.to_radians() / 2.0).tan();
+                // a move steeper than the cone (or vertical) is lowest at
+                // the end it descends to
+                let t = if self.axy < 1e-18 || k * k * self.axy <= d.z * d.z {
+                    if d.z < 0.0 {
+                        hi
+                    } else {
+                        lo
+                    }
+                } else {
+                    let b = wx * d.x + wy * d.y;
+                    let h2 = (wx * wx + wy * wy - b * b / self.axy).max(0.0);
+                    let s = -d.z * h2.sqrt() / (self.axy * (k * k * self.axy - d.z * d.z)).sqrt();
+                    (b / self.axy + s).clamp(lo, hi)
+                };
+                a.z + d.z * t + k * self.rho(wx, wy, t)
+            }
+            Tool::TaperBall { .. } => {
+                let Some((mut lo, mut hi)) = self.interval(wx, wy) else {
+                    return f64::INFINITY;
+                };
+                let f = |t: f64| a.z + d.z * t + self.tool.profile(self.rho(wx, wy, t).min(r));
+                let g = 0.5 * (5f64.sqrt() - 1.0);
+                let mut best = f(lo).min(f(hi));
+                for _ in 0..60 {
+                    if hi - lo < 1e-12 {
+                        break;
+                    }
+                    let (m1, m2) = (hi - g * (hi - lo), lo + g * (hi - lo));
+                    if f(m1) < f(m2) {
+                        hi = m2;
+                    } else {
+                        lo = m1;
+                    }
+                }
+                best = best.min(f(0.5 * (lo + hi)));
+                best
+            }
+        }
+    }
+
+    /// X range (mm) of the row y where the tool's XY footprint of this move
+    /// lies: the capsule of radius r around the move's XY projection.
+    fn row_span(&self, y: f64) -> Option<(f64, f64)> {
+        let r = self.r;
+        let (ax, ay) = (self.a.x, self.a.y);
+        let (bx, by) = (ax + self.d.x, ay + self.d.y);
+        let mut lo = f64::INFINITY;
+        let mut hi = f64::NEG_INFINITY;
+        for (cx, cy) in [(ax, ay), (bx, by)] {
+            let h = r * r - (y - cy) * (y - cy);
+            if h >= 0.0 {
+                lo = lo.min(cx - h.sqrt());
+                hi = hi.max(cx + h.sqrt());
+            }
+        }
+        if self.axy > 1e-18 && self.d.y.abs() > 1e-12 {
+            // the straight part: |n.(p-a)| <= r and 0 <= (p-a).d <= |d|^2
+            let len = self.axy.sqrt();
+            let (nx, ny) = (-self.d.y / len, self.d.x / len);
+            let mut l = f64::NEG_INFINITY;
+            let mut h = f64::INFINITY;
+            let mut cut = |k: f64, c: f64, lo_v: f64, hi_v: f64| {
+                // lo_v <= k * x + c <= hi_v
+                let (p, q) = ((lo_v - c) / k, (hi_v - c) / k);
+                l = l.max(p.min(q));
+                h = h.min(p.max(q));
+            };
+            cut(nx, ny * (y - ay) - nx * ax, -r, r);
+            cut(self.d.x, self.d.y * (y - ay) - self.d.x * ax, 0.0, self.axy);
+            if self.d.x.abs() < 1e-12 {
+                // k = 0 in the second constraint: it holds for all x or none
+                let v = self.d.y * (y - ay);
+                if !(0.0..=self.axy).contains(&v) {
+                    h = f64::NEG_INFINITY;
+                } else {
+                    let (p, q) = ((-r - ny * (y - ay)) / nx, (r - ny * (y - ay)) / nx);
+                    l = p.min(q) + ax;
+                    h = p.max(q) + ax;
+                }
+            }
+            if l <= h {
+                lo = lo.min(l);
+                hi = hi.max(h);
+            }
+        }
+        (lo <= hi).then_some((lo, hi))
+    }
+}
+
+/// Cut `stock` (top heights, row 0 = top) by every move of `prog` with
+/// `tool`. Returns the job lines of rapids that cut into stock.
+pub fn cut(stock: &Stock, heights: &mut Grid<f32>, prog: &Program, tool: Tool) -> Vec<usize> {
+    let (w, h) = (heights.w, heights.h);
+    let p = stock.pitch;
+    let r = tool.radius();
+    let row_of = |y: f64| (stock.y0 + stock.height - y) / p - 0.5;
+    let nb = h.div_ceil(BAND);
+    let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nb];
+    for (k, s) in prog.segments.iter().enumerate() {
+        let (ylo, yhi) = (s.a.y.min(s.b.y) - r, s.a.y.max(s.b.y) + r);
+        let j0 = row_of(yhi).ceil().max(0.0);
+        let j1 = row_of(ylo).floor().min(h as f64 - 1.0);
+        if j0 > j1 {
+            continue;
+        }
+        for bin in bins
+            .iter_mut()
+            .take(j1 as usize / BAND + 1)
+            .skip(j0 as usize / BAND)
+        {
+            bin.push(k as u32);
+        }
+    }
+    let floor = -stock.thickness as f32;
+    let mut touched: Vec<usize> = heights
+        .data
+        .par_chunks_mut(w * BAND)
+        .zip(bins.par_iter())
+        .enumerate()
+        .flat_map_iter(|(band, (rows, bin))| {
+            let mut hits = Vec::new();
+            let ja = band * BAND;
+            let jb = ja + rows.len() / w;
+            for &k in bin {
+                let seg = &prog.segments[k as usize];
+                let sw = Sweep::new(seg, tool);
+                let rapid = seg.kind == Kind::Rapid;
+                let mut hit = false;
+                for j in ja..jb {
+                    let (_, y) = stock.centre(0, j);
+                    let Some((xl, xh)) = sw.row_span(y) else {
+                        continue;
+                    };
+                    let i0 = ((xl - stock.x0) / p - 0.5).ceil().max(0.0) as usize;
+                    let i1 = ((xh - stock.x0) / p - 0.5).floor();
+                    if i1 < 0.0 {
+                        continue;
+                    }
+                    let i1 = (i1 as usize).min(w - 1);
+                    let row = &mut rows[(j - ja) * w..(j - ja + 1) * w];
+                    let wy = y - sw.a.y;
+                    for (i, cell) in row.iter_mut().enumerate().take(i1 + 1).skip(i0) {
+                        let x = stock.x0 + (i as f64 + 0.5) * p;
+                        let z = sw.lowest(x - sw.a.x, wy);
+                        if z < *cell as f64 {
+                            if rapid && z < *cell as f64 - TOUCH && *cell > floor {
+                                hit = true;
+                            }
+                            *cell = (z as f32).max(floor);
+                        }
+                    }
+                }
+                if hit {
+                    hits.push(seg.line);
+                }
+            }
+            hits
+        })
+        .collect();
+    touched.sort_unstable();
+    touched.dedup();
+    touched
+}
+
+/// Lines whose moves leave the machine's travel, with the travel box's
+/// lower-left corner at `origin` in job coordinates and Z within +-travel.
+pub fn out_of_travel(prog: &Program, m: &Machine, origin: (f64, f64)) -> Vec<usize> {
+    let inside = |p: DVec3| {
+        p.x >= origin.0 - 1e-9
+            && p.x <= origin.0 + m.travel.x + 1e-9
+            && p.y >= origin.1 - 1e-9
+            && p.y <= origin.1 + m.travel.y + 1e-9
+            && p.z.abs() <= m.travel.z + 1e-9
+    };
+    let mut v: Vec<usize> = prog
+        .segments
+        .iter()
+        .filter(|s| !inside(s.a) || !inside(s.b))
+        .map(|s| s.line)
+        .collect();
+    v.dedup();
+    v
+}
+
+/// Run time with GRBL-style acceleration: per-axis rate and acceleration
+/// limits along each move, junction speeds from the junction deviation, a
+/// forward and backward pass, trapezoidal speed profiles; plus dwells.
+pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
+    let segs: Vec<&Segment> = prog
+        .segments
+        .iter()
+        .filter(|s| (s.b - s.a).length() > 1e-9)
+        .collect();
+    let n = segs.len();
+    if n == 0 {
+        return prog.dwell_s;
+    }
+    let units: Vec<DVec3> = segs.iter().map(|s| (s.b - s.a).normalize()).collect();
+    let limit = |u: DVec3, per_axis: &dyn Fn(usize) -> f64| {
+        (0..3)
+            .filter(|&k| u[k].abs() > 1e-12)
+            .map(|k| per_axis(k) / u[k].abs())
+            .fold(f64::INFINITY, f64::min)
+    };
+    let mut vmax = vec![0.0; n];
+    let mut acc = vec![0.0; n];
+    let mut len = vec![0.0; n];
+    for (k, s) in segs.iter().enumerate() {
+        let u = units[k];
+        let rate = limit(u, &|a| m.max_rate.get(a) / 60.0);
+        vmax[k] = if s.kind == Kind::Rapid {
+            rate
+        } else {
+            (s.feed / 60.0).min(rate)
+        };
+        acc[k] = limit(u, &|a| m.acceleration.get(a));
+        len[k] = (s.b - s.a).length();
+    }
+    // highest entry speed allowed by the junction with the previous move
+    let mut entry_max = vec![0.0; n];
+    for k in 1..n {
+        if segs[k].stop_before {
+            continue;
+        }
+        let cos = -units[k - 1].dot(units[k]);
+        let vj = if cos > 0.999999 {
+            0.0
+        } else if cos < -0.999999 {
+            f64::INFINITY
+        } else {
+            let s = (0.5 * (1.0 - cos)).sqrt();
+            (acc[k].min(acc[k - 1]) * m.junction_deviation * s / (1.0 - s)).sqrt()
+        };
+        entry_max[k] = vj.min(vmax[k]).min(vmax[k - 1]);
+    }
+    let mut entry = entry_max.clone();
+    let mut exit = vec![0.0; n];
+    for k in (0..n).rev() {
+        let next_entry = if k + 1 < n { entry[k + 1] } else { 0.0 };
+        exit[k] = next_entry;
+        entry[k] = entry[k].min((next_entry * next_entry + 2.0 * acc[k] * len[k]).sqrt());
+    }
+    let mut t = prog.dwell_s;
+    let mut v_in = 0.0f64;
+    for k in 0..n {
+        let ve = entry[k].min(v_in);
+        let vx = exit[k].min((ve * ve + 2.0 * acc[k] * len[k]).sqrt());
+        let a = acc[k];
+        let vp = vmax[k]
+            .min(((2.0 * a * len[k] + ve * ve + vx * vx) / 2.0).sqrt())
+            .max(ve.max(vx));
+        let da = (vp * vp - ve * ve) / (2.0 * a);
+        let dd = (vp * vp - vx * vx) / (2.0 * a);
+        let cruise = (len[k] - da - dd).max(0.0);
+        t += (vp - ve) / a + (vp - vx) / a + if vp > 0.0 { cruise / vp } else { 0.0 };
+        v_in = vx;
+    }
+    t
+}
+
+/// The relief's height (mm, Z frame: 0 = top) at a point, bilinear between
+/// samples; None outside the relief.
+pub fn target_at(r: &Relief, x: f64, y: f64) -> Option<f64> {
+    if x < 0.0 || y < 0.0 || x > r.width_mm || y > r.height_mm {
+        return None;
+    }
+    let (w, h) = (r.heights.w, r.heights.h);
+    let (px, py) = (r.width_mm / w as f64, r.height_mm / h as f64);
+    let fi = (x / px - 0.5).clamp(0.0, (w - 1) as f64);
+    let fj = ((r.height_mm - y) / py - 0.5).clamp(0.0, (h - 1) as f64);
+    let (i0, j0) = (fi.floor() as usize, fj.floor() as usize);
+    let (i1, j1) = ((i0 + 1).min(w - 1), (j0 + 1).min(h - 1));
+    let (tx, ty) = (fi - i0 as f64, fj - j0 as f64);
+    let z = |i: usize, j: usize| *r.heights.get(i, j) as f64;
+    let top = z(i0, j0) * (1.0 - tx) + z(i1, j0) * tx;
+    let bot = z(i0, j1) * (1.0 - tx) + z(i1, j1) * tx;
+    Some(top * (1.0 - ty) + bot * ty - r.depth_mm)
+}
+
+/// Compare the cut with the relief: (max gouge, max residual, mean residual).
+pub fn deviation(stock: &Stock, cut: &Grid<f32>, relief: &Relief) -> (f64, f64, f64, Grid<f32>) {
+    let mut dev = Grid::new(cut.w, cut.h, f32::NAN);
+    dev.data
+        .par_chunks_mut(cut.w)
+        .enumerate()
+        .for_each(|(j, row)| {
+            for (i, d) in row.iter_mut().enumerate() {
+                let (x, y) = stock.centre(i, j);
+                if let Some(t) = target_at(relief, x, y) {
+                    *d = (*cut.get(i, j) as f64 - t) as f32;
+                }
+            }
+        });
+    let (mut gouge, mut res, mut sum, mut n) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+    for &d in dev.data.iter().filter(|d| !d.is_nan()) {
+        let d = d as f64;
+        gouge = gouge.max(-d);
+        res = res.max(d);
+        sum += d.max(0.0);
+        n += 1;
+    }
+    (gouge, res, if n > 0 { sum / n as f64 } else { 0.0 }, dev)
+}
+
+/// Volume removed from the stock (mm^3).
+pub fn removed(stock: &Stock, cut: &Grid<f32>) -> f64 {
+    let floor = -stock.thickness;
+    cut.data
+        .par_iter()
+        .map(|&z| -(z as f64).max(floor).min(0.0))
+        .sum::<f64>()
+        * stock.pitch
+        * stock.pitch
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode::program;
+
+    fn stock(size: f64, pitch: f64) -> (Stock, Grid<f32>) {
+        let s = Stock {
+            x0: 0.0,
+            y0: 0.0,
+            width: size,
+            height: size,
+            thickness: 10.0,
+            pitch,
+        };
+        let (w, h) = s.cells();
+        (s, Grid::new(w, h, 0.0))
+    }
+
+    /// Brute force: the tool placed at many points along each move.
+    fn brute(s: &Stock, prog: &Program, tool: Tool) -> Grid<f32> {
+        let (w, h) = s.cells();
+        let mut g = Grid::new(w, h, 0.0f32);
+        for seg in &prog.segments {
+            let n = 4000;
+            for k in 0..=n {
+                let p = seg.a + (seg.b - seg.a) * (k as f64 / n as f64);
+                for j in 0..h {
+                    for i in 0..w {
+                        let (x, y) = s.centre(i, j);
+                        let r = ((x - p.x).powi(2) + (y - p.y).powi(2)).sqrt();
+                        let z = p.z + tool.profile(r);
+                        let c = g.get(i, j).min(z as f32).max(-10.0);
+                        g.set(i, j, c);
+                    }
+                }
+            }
+        }
+        g
+    }
+
+    #[test]
+    fn exact_sweeps_match_dense_stamping() {
+        let job = "G0 X1 Y1.2 Z1\nG1 Z-0.8 F100\nG1 X4.1 Y2.9 Z-1.3\nG1 X2.2 Y4.0 Z-0.2\nG1 X2.2 Y1.0 Z-0.6\n";
+        let prog = program(job).unwrap();
+        for spec in ["ball:2", "flat:1.5", "vbit:60:3", "taperball:0.3:10:2.5"] {
+            let tool = Tool::parse(spec).unwrap();
+            let (s, mut g) = stock(5.0, 0.1);
+            cut(&s, &mut g, &prog, tool);
+            let b = brute(&s, &prog, tool);
+            // compare away from the rim of the footprint, where a flat or
+            // V tool's edge makes the surface jump
+            let (w, _) = s.cells();
+            let rim = |k: usize| {
+                let (x, y) = s.centre(k % w, k / w);
+                let d = prog.segments.iter().map(|sg| {
+                    let (a, b) = (sg.a.truncate(), sg.b.truncate());
+                    let q = glam::DVec2::new(x, y);
+                    let t = if a == b {
+                        0.0
+                    } else {
+                        ((q - a).dot(b - a) / (b - a).length_squared()).clamp(0.0, 1.0)
+                    };
+                    (q - (a + (b - a) * t)).length()
+                });
+                (d.fold(f64::MAX, f64::min) - tool.radius()).abs() < 0.02
+            };
+            let diffs = || {
+                g.data
+                    .iter()
+                    .zip(&b.data)
+                    .enumerate()
+                    .filter(|(k, _)| !rim(*k))
+                    .map(|(_, (x, y))| x - y)
+            };
+            let worst = diffs().fold(f32::MIN, f32::max);
+            let under = diffs().map(|d| -d).fold(f32::MIN, f32::max);
+            eprintln!("{spec}: exact above stamping by {worst}, below by {under}");
+            assert!(
+                worst < 2e-3 && under < 2e-3,
+                "{spec}: exact above stamping by {worst}, below by {under}"
+            );
+        }
+    }
+
+    #[test]
+    fn time_of_a_long_straight_move_is_accel_plus_cruise() {
+        let m = Machine::load("grbl-generic").unwrap();
+        // 100 mm at 300 mm/min = 5 mm/s, accel 10 mm/s^2: 0.5 s up, 0.5 s down
+        let prog = program("G1 X100 F300\n").unwrap();
+        let t = estimate_time(&prog, &m);
+        let want = 0.5 + 0.5 + (100.0 - 2.0 * 1.25) / 5.0;
+        assert!((t - want).abs() < 1e-9, "{t} vs {want}");
+    }
+}

@@ -1,0 +1,321 @@
+//! The cut simulator through the real binary: hand-computed grooves, rapids
+//! through stock, a known-good job shifted down, malformed jobs.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+
+/// A flat relief (all at Z = 0) of `w x h` pixels, `pitch` mm, 5 mm deep.
+fn flat_relief(dir: &Path, w: usize, h: usize, pitch: f64) -> PathBuf {
+    let p = dir.join("flat.png");
+    write_png16(&p, w, h, &vec![65535u16; w * h]);
+    let side = serde_json::json!({"format": "relievo-relief/1", "width_mm": w as f64 * pitch, "height_mm": h as f64 * pitch, "depth_mm": 5.0, "pixels": [w, h]});
+    std::fs::write(p.with_extension("json"), side.to_string()).unwrap();
+    p
+}
+
+/// Simulate `job` on `relief`; returns the cut (w, h, Z in mm) and the report.
+fn simulate(
+    dir: &Path,
+    relief: &Path,
+    job: &str,
+    tool: &str,
+) -> (usize, usize, Vec<f64>, serde_json::Value) {
+    let nc = dir.join("job.nc");
+    std::fs::write(&nc, job).unwrap();
+    let (cut, rep) = (dir.join("cut.png"), dir.join("report.json"));
+    ok(&run(&[
+        "simulate",
+        nc.to_str().unwrap(),
+        "--relief",
+        relief.to_str().unwrap(),
+        "--tool",
+        tool,
+        "-o",
+        cut.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+        "-q",
+    ]));
+    let (w, h, mm, depth) = relief_mm(&cut);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rep).unwrap()).unwrap();
+    (w, h, mm.iter().map(|v| v - depth).collect(), report)
+}
+
+const PITCH: f64 = 0.1;
+
+fn centre(i: usize, j: usize, h: usize) -> (f64, f64) {
+    (
+        (i as f64 + 0.5) * PITCH,
+        h as f64 * PITCH - (j as f64 + 0.5) * PITCH,
+    )
+}
+
+fn ball(r: f64, rho: f64) -> f64 {
+    if rho <= r {
+        r - (r * r - rho * rho).sqrt()
+    } else {
+        f64::INFINITY
+    }
+}
+
+#[test]
+fn straight_grooves_have_the_exact_profile() {
+    let d = scratch("sim-grooves");
+    let relief = flat_relief(&d, 200, 100, PITCH);
+    let job = "G21 G90\nG0 Z5\nG0 X2 Y5\nG1 Z-1 F100\nG1 X18 F300\nG0 Z5\nM30\n";
+    for (tool, profile) in [
+        (
+            "ball:3",
+            Box::new(|rho: f64| ball(1.5, rho)) as Box<dyn Fn(f64) -> f64>,
+        ),
+        (
+            "flat:3",
+            Box::new(|rho: f64| if rho <= 1.5 { 0.0 } else { f64::INFINITY }),
+        ),
+        (
+            "vbit:90:4",
+            Box::new(|rho: f64| if rho <= 2.0 { rho } else { f64::INFINITY }),
+        ),
+    ] {
+        let (w, h, z, report) = simulate(&d, &relief, job, tool);
+        let mut checked = 0;
+        let mut width = 0.0;
+        for j in 0..h {
+            let i = w / 2;
+            let (_, y) = centre(i, j, h);
+            let rho = (y - 5.0).abs();
+            if (rho - 1.5).abs() < 0.06 && tool != "vbit:90:4" {
+                continue; // the rim of a flat end: a jump, either side is right
+            }
+            let want = (-1.0 + profile(rho)).min(0.0);
+            assert!(
+                (z[j * w + i] - want).abs() < 1e-3,
+                "{tool}: y {y:.2}: {} vs {want}",
+                z[j * w + i]
+            );
+            if z[j * w + i] < -1e-6 {
+                width += PITCH;
+            }
+            checked += 1;
+        }
+        assert!(checked > 90);
+        let want_width = match tool {
+            "ball:3" => 2.0 * (1.5f64 * 1.5 - 0.5 * 0.5).sqrt(),
+            "flat:3" => 3.0,
+            _ => 2.0,
+        };
+        assert!(
+            (width - want_width).abs() <= 2.0 * PITCH,
+            "{tool}: groove {width} mm wide, want {want_width}"
+        );
+        assert_eq!(report["rapids_in_stock"].as_array().unwrap().len(), 0);
+        assert!(report["max_gouge_mm"].as_f64().unwrap() > 0.9);
+        assert_eq!(report["lines"].as_u64(), Some(7));
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+#[test]
+fn arc_grooves_with_ij_and_r_and_a_plunge() {
+    let d = scratch("sim-arcs");
+    let relief = flat_relief(&d, 240, 240, PITCH);
+    let h = 240;
+    for arc in ["G2 X4 Y12 I-6 J0", "G2 X4 Y12 R6", "g2x4y12r6"] {
+        let job = format!("G0 Z5\nG0 X16 Y12\nG1 Z-1 F100\n{arc} F400\nG0 Z5\n");
+        let (w, _, z, _) = simulate(&d, &relief, &job, "ball:3");
+        let mut checked = 0;
+        for j in 0..h {
+            for i in 0..w {
+                let (x, y) = centre(i, j, h);
+                if y > 11.0 {
+                    continue; // the arc is the lower half circle; skip its ends
+                }
+                let rho = (((x - 10.0).powi(2) + (y - 12.0).powi(2)).sqrt() - 6.0).abs();
+                let want = (-1.0 + ball(1.5, rho)).min(0.0);
+                assert!(
+                    (z[j * w + i] - want).abs() < 1e-3,
+                    "{arc}: ({x:.2},{y:.2}): {} vs {want}",
+                    z[j * w + i]
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 10000);
+    }
+    // plunges: a flat end leaves a flat-bottomed hole, a ball a spherical dimple
+    for (tool, depth_at) in [
+        (
+            "flat:4",
+            Box::new(|r: f64| if r < 2.0 { -2.0 } else { 0.0 }) as Box<dyn Fn(f64) -> f64>,
+        ),
+        ("ball:4", Box::new(|r: f64| (-2.0 + ball(2.0, r)).min(0.0))),
+    ] {
+        let (w, _, z, _) = simulate(&d, &relief, "G0 X10 Y10 Z3\nG1 Z-2 F50\nG0 Z3\n", tool);
+        for j in 0..h {
+            for i in 0..w {
+                let (x, y) = centre(i, j, h);
+                let r = ((x - 10.0).powi(2) + (y - 10.0).powi(2)).sqrt();
+                if (r - 2.0).abs() < 0.05 {
+                    continue;
+                }
+                assert!(
+                    (z[j * w + i] - depth_at(r)).abs() < 1e-3,
+                    "{tool} plunge at r {r}"
+                );
+            }
+        }
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+#[test]
+fn a_rapid_through_stock_is_reported_with_its_line() {
+    let d = scratch("sim-rapid");
+    let relief = flat_relief(&d, 100, 100, PITCH);
+    let job = "G0 Z5\nG0 X1 Y1\nG0 Z-0.5\n(oops: rapid across)\nG0 X9 Y9\nG0 Z5\nG0 X1\n";
+    let (_, _, _, report) = simulate(&d, &relief, job, "flat:2");
+    assert_eq!(report["rapids_in_stock"], serde_json::json!([3, 5]));
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// A known-good ball-end job (brute-force drop-cutter on every sample of
+/// a smooth relief), then the same job shifted down by 0.1 mm.
+#[test]
+fn a_known_good_cut_shifted_down_gouges_by_the_shift() {
+    let d = scratch("sim-shift");
+    let relief = d.join("waves.png");
+    let (w, h) = (64usize, 48usize);
+    let v: Vec<u16> = (0..w * h)
+        .map(|k| {
+            let (x, y) = ((k % w) as f64 * 0.5, (k / w) as f64 * 0.5);
+            let z = 0.5 + 0.3 * (x / 5.0).sin() * (y / 4.0).cos() + 0.1 * (x / 3.0 + y / 7.0).cos();
+            (z.clamp(0.0, 1.0) * 65535.0).round() as u16
+        })
+        .collect();
+    write_png16(&relief, w, h, &v);
+    let side = serde_json::json!({"format": "relievo-relief/1", "width_mm": 32.0, "height_mm": 24.0, "depth_mm": 3.0, "pixels": [w, h]});
+    std::fs::write(relief.with_extension("json"), side.to_string()).unwrap();
+    let (w, h, mm, depth) = relief_mm(&relief);
+    let p = 32.0 / w as f64;
+    let r = 1.0;
+    // brute-force drop-cutter of a ball on the samples: the lowest tip Z
+    // touching no sample
+    let cl = |x: f64, y: f64| {
+        let mut z = f64::MIN;
+        let (ci, cj) = ((x / p) as isize, ((h as f64 * p - y) / p) as isize);
+        for j in (cj - 4).max(0) as usize..((cj + 5).max(0) as usize).min(h) {
+            for i in (ci - 4).max(0) as usize..((ci + 5).max(0) as usize).min(w) {
+                let (sx, sy) = ((i as f64 + 0.5) * p, h as f64 * p - (j as f64 + 0.5) * p);
+                let rho = ((sx - x).powi(2) + (sy - y).powi(2)).sqrt();
+                if rho <= r {
+                    z = z.max(mm[j * w + i] - depth - ball(r, rho));
+                }
+            }
+        }
+        z
+    };
+    let job = |shift: f64| {
+        let mut s = String::from("(tool: ball:2)\nG21 G90\nG0 Z2\n");
+        // CL points every 1/8 sample: the chords between them dip below the
+        // CL surface's creases by little
+        let step = p / 8.0;
+        let rows = (h as f64 * p / (p / 2.0)) as usize;
+        for row in 0..=rows {
+            let y = row as f64 * p / 2.0;
+            s += &format!("G0 X0 Y{y:.4}\n");
+            let n = (32.0 / step) as usize;
+            for k in 0..=n {
+                let x = k as f64 * step;
+                let z = cl(x, y) + shift;
+                s += &format!("G1 X{x:.4} Y{y:.4} Z{z:.5} F1000\n");
+            }
+            s += "G0 Z2\n";
+        }
+        s
+    };
+    let nc = d.join("good.nc");
+    let (cut, rep) = (d.join("cut.png"), d.join("r.json"));
+    for (shift, name) in [(0.0, "good"), (-0.1, "shifted")] {
+        std::fs::write(&nc, job(shift)).unwrap();
+        ok(&run(&[
+            "simulate",
+            nc.to_str().unwrap(),
+            "--relief",
+            relief.to_str().unwrap(),
+            "-o",
+            cut.to_str().unwrap(),
+            "--report",
+            rep.to_str().unwrap(),
+            "-q",
+        ]));
+        let report: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        let gouge = report["max_gouge_mm"].as_f64().unwrap();
+        eprintln!(
+            "{name}: gouge {gouge:.5} mm, residual max {:.4}",
+            report["max_residual_mm"]
+        );
+        if shift == 0.0 {
+            assert!(gouge < 0.002, "known-good job gouges {gouge}");
+        } else {
+            assert!((gouge - 0.1).abs() <= 0.005, "shifted job gouges {gouge}");
+        }
+        assert!(report["time_s"].as_f64().unwrap() > 0.0);
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+#[test]
+fn malformed_jobs_fail_with_the_line_and_leave_nothing() {
+    let d = scratch("sim-bad");
+    let relief = flat_relief(&d, 50, 50, PITCH);
+    for (job, want) in [
+        ("G0 Z5\nG1 X1 Y1 Z-1 F100\nG1 X2 Q7\n", "line 3"),
+        ("G0 Z5\nG1 X1\n", "line 2"),
+        ("G0 Z5\n\n\nG2 X1 Y1 I5 J5 F100\n", "line 4"),
+        ("G0 Z5\nG38.2 Z-3\n", "line 2"),
+        ("G0 X1 (never closed\n", "line 1"),
+    ] {
+        let nc = d.join("bad.nc");
+        std::fs::write(&nc, job).unwrap();
+        let o = run(&[
+            "simulate",
+            nc.to_str().unwrap(),
+            "--relief",
+            relief.to_str().unwrap(),
+            "--tool",
+            "ball:1",
+            "-o",
+            d.join("out.png").to_str().unwrap(),
+            "--report",
+            d.join("out.json").to_str().unwrap(),
+            "--deviation",
+            d.join("outdev.png").to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{job:?} succeeded");
+        assert!(
+            err.contains(want) && err.contains("bad.nc"),
+            "{job:?}: {err}"
+        );
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        for f in ["out.png", "out.json", "outdev.png"] {
+            assert!(!d.join(f).exists(), "{f} left behind");
+        }
+    }
+    // no tool anywhere
+    let nc = d.join("notool.nc");
+    std::fs::write(&nc, "G0 Z5\n").unwrap();
+    let o = run(&[
+        "simulate",
+        nc.to_str().unwrap(),
+        "--relief",
+        relief.to_str().unwrap(),
+        "-o",
+        d.join("out.png").to_str().unwrap(),
+    ]);
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("tool"));
+    std::fs::remove_dir_all(d).unwrap();
+}
