@@ -22,3 +22,10 @@ if python3 -c 'import numpy, scipy, PIL' 2>/dev/null; then
 else
   echo "  (numpy/scipy/pillow missing: pip install numpy scipy pillow)"
 fi
+
+echo "== simulator: ~1M-line finishing job on a 2048 x 2048 stock"
+$R -q relief $M/stanford-bunny.obj --resolution 2048 --fov 0 -o "$T/sq.png" --width 100
+if python3 -c 'import numpy, PIL' 2>/dev/null; then
+  python3 bench/make_finish_job.py "$T/sq.png" "$T/finish.nc" 4
+  wall $R -v simulate "$T/finish.nc" --relief "$T/sq.png" --stock 100x100x8 -o "$T/cut.png" --report "$T/report.json"
+fi

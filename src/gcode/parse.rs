@@ -36,50 +36,49 @@ pub fn strip(line: &str) -> String {
 pub fn parse_line(text: &str, number: usize) -> Result<Line> {
     let mut words = Vec::new();
     let mut comments = Vec::new();
-    let chars: Vec<char> = text.chars().collect();
+    let b = text.as_bytes();
     let mut i = 0;
-    while i < chars.len() {
-        let c = chars[i];
-        if c == '(' {
-            let end = chars[i..].iter().position(|&d| d == ')');
-            let Some(end) = end else {
-                bail!("line {number}: comment '(' is not closed")
+    while i < b.len() {
+        let c = b[i];
+        if c == b'(' {
+            let Some(end) = b[i..].iter().position(|&d| d == b')') else {
+                bail!("line {number}: comment '(' is not closed");
             };
-            comments.push(
-                chars[i + 1..i + end]
-                    .iter()
-                    .collect::<String>()
-                    .trim()
-                    .to_string(),
-            );
+            comments.push(text[i + 1..i + end].trim().to_string());
             i += end + 1;
             continue;
         }
-        if c == ';' {
-            comments.push(chars[i + 1..].iter().collect::<String>().trim().to_string());
+        if c == b';' {
+            comments.push(text[i + 1..].trim().to_string());
             break;
         }
-        if c.is_whitespace() || (c == '%' && words.is_empty()) {
+        if c.is_ascii_whitespace() || (c == b'%' && words.is_empty()) {
             i += 1;
             continue;
         }
-        let letter = c.to_ascii_uppercase();
+        let letter = c.to_ascii_uppercase() as char;
         if !letter.is_ascii_alphabetic() {
+            let bad = text[i..].chars().next().unwrap_or('?');
             bail!(
-                "line {number}: unexpected character '{c}' in '{}'",
+                "line {number}: unexpected character '{bad}' in '{}'",
                 text.trim()
             );
         }
         i += 1;
-        let mut num = String::new();
-        while i < chars.len()
-            && (chars[i].is_ascii_digit() || matches!(chars[i], '.' | '-' | '+' | ' ' | '\t'))
+        let start = i;
+        let mut spaced = false;
+        while i < b.len()
+            && (b[i].is_ascii_digit() || matches!(b[i], b'.' | b'-' | b'+' | b' ' | b'\t'))
         {
-            if !chars[i].is_whitespace() {
-                num.push(chars[i]);
-            }
+            spaced |= b[i] == b' ' || b[i] == b'\t';
             i += 1;
         }
+        let raw = &text[start..i];
+        let num: std::borrow::Cow<str> = if spaced {
+            raw.split_whitespace().collect::<String>().into()
+        } else {
+            raw.into()
+        };
         let value: f64 = match num.parse() {
             Ok(v) if f64::is_finite(v) => v,
             _ => bail!(
