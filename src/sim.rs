@@ -749,6 +749,49 @@ mod tests {
         }
     }
 
+    /// The ball's fast path (end spheres, side only near the move) equals
+    /// the full capsule evaluation on random polylines, steep ones too.
+    #[test]
+    fn ball_fast_path_equals_full_capsule() {
+        let mut seed = 99u64;
+        let mut rnd = || {
+            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let tool = Tool::Ball { d: 1.6 };
+        for trial in 0..6 {
+            let mut job = String::from("G0 X3 Y3 Z0.5\nG1 F500\n");
+            for k in 0..40 {
+                let steep = if trial % 2 == 0 { 3.0 } else { 0.4 };
+                let (x, y) = (0.5 + 5.0 * rnd(), 0.5 + 5.0 * rnd());
+                let z = -1.5 + steep * (rnd() - 0.5);
+                if k % 7 == 3 {
+                    job += &format!("G1 Z{z:.4}\n"); // a plunge or lift
+                } else if k % 5 == 1 {
+                    job += &format!("G1 X{:.4} Z{z:.4}\n", x); // along X only
+                } else {
+                    job += &format!("G1 X{x:.4} Y{y:.4} Z{z:.4}\n");
+                }
+            }
+            let prog = program(&job).unwrap();
+            let (s, mut g) = stock(6.0, 0.05);
+            cut(&s, &mut g, &prog, tool);
+            let (w, h) = s.cells();
+            let sweeps: Vec<Sweep> = prog.segments.iter().map(|sg| Sweep::new(sg, tool)).collect();
+            let mut worst = 0.0f64;
+            for j in 0..h {
+                for i in 0..w {
+                    let (x, y) = s.centre(i, j);
+                    let z = sweeps.iter().map(|sw| sw.lowest(x - sw.a.x, y - sw.a.y)).fold(0.0f64, f64::min).max(-10.0);
+                    worst = worst.max((z - *g.get(i, j) as f64).abs());
+                }
+            }
+            // f32 arithmetic in the fast path: micrometre-level agreement
+            eprintln!("trial {trial}: {worst:.2e} mm");
+            assert!(worst < 2e-4, "trial {trial}: fast path off by {worst} mm");
+        }
+    }
+
     #[test]
     fn time_of_a_long_straight_move_is_accel_plus_cruise() {
         let m = Machine::load("grbl-generic").unwrap();
