@@ -755,7 +755,9 @@ mod tests {
     fn ball_fast_path_equals_full_capsule() {
         let mut seed = 99u64;
         let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let tool = Tool::Ball { d: 1.6 };
@@ -777,12 +779,20 @@ mod tests {
             let (s, mut g) = stock(6.0, 0.05);
             cut(&s, &mut g, &prog, tool);
             let (w, h) = s.cells();
-            let sweeps: Vec<Sweep> = prog.segments.iter().map(|sg| Sweep::new(sg, tool)).collect();
+            let sweeps: Vec<Sweep> = prog
+                .segments
+                .iter()
+                .map(|sg| Sweep::new(sg, tool))
+                .collect();
             let mut worst = 0.0f64;
             for j in 0..h {
                 for i in 0..w {
                     let (x, y) = s.centre(i, j);
-                    let z = sweeps.iter().map(|sw| sw.lowest(x - sw.a.x, y - sw.a.y)).fold(0.0f64, f64::min).max(-10.0);
+                    let z = sweeps
+                        .iter()
+                        .map(|sw| sw.lowest(x - sw.a.x, y - sw.a.y))
+                        .fold(0.0f64, f64::min)
+                        .max(-10.0);
                     worst = worst.max((z - *g.get(i, j) as f64).abs());
                 }
             }
