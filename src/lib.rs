@@ -20,3 +20,4 @@ pub mod machine;
 pub mod sim;
 pub mod simulate;
 pub mod tool;
+pub mod toolpath;
