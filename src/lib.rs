@@ -2,6 +2,7 @@
 //! bas-reliefs to CNC jobs. Data flows one way:
 //! scene -> relief -> (toolpath -> gcode -> sim / grbl).
 
+pub mod cam;
 pub mod error;
 pub mod export;
 pub mod grid;

@@ -33,6 +33,134 @@ enum Cmd {
     Relief(ReliefArgs),
     /// Simulate a G-code job cutting the stock and judge it against a relief.
     Simulate(SimulateArgs),
+    /// Turn a relief into a GRBL job (ball-end raster finishing).
+    Toolpath(ToolpathArgs),
+    /// Relief and toolpath in one call; without MODEL, the demo scene.
+    Carve(CarveArgs),
+}
+
+#[derive(Args)]
+struct ToolpathArgs {
+    /// Relief PNG (its JSON sidecar gives the size).
+    relief: PathBuf,
+    /// Output G-code job.
+    #[arg(short, long, default_value = "job.nc")]
+    output: PathBuf,
+    /// Relief width in mm, for a heightmap without sidecar.
+    #[arg(long, allow_negative_numbers = true)]
+    width: Option<f64>,
+    /// Relief depth in mm, for a heightmap without sidecar.
+    #[arg(long, allow_negative_numbers = true)]
+    depth: Option<f64>,
+    #[command(flatten)]
+    cut: CutOpts,
+}
+
+#[derive(Args)]
+struct CarveArgs {
+    /// Model as for `relief`; without it, the demo scene.
+    model: Option<PathBuf>,
+    /// Output G-code job; the relief is written beside it as NAME-relief.png.
+    #[arg(short, long, default_value = "job.nc")]
+    output: PathBuf,
+    #[command(flatten)]
+    relief: ReliefOpts,
+    #[command(flatten)]
+    cut: CutOpts,
+}
+
+#[derive(Args)]
+struct CutOpts {
+    /// ball:D (the finishing strategy so far needs a ball).
+    #[arg(long, default_value = "ball:3.175")]
+    tool: String,
+    /// Distance between rows: MM or PERCENT% of the tool diameter.
+    #[arg(long, default_value = "10%", value_parser = relievo::cam::Stepover::parse)]
+    stepover: relievo::cam::Stepover,
+    /// Scallop height in mm; sets the stepover for a ball.
+    #[arg(long)]
+    scallop: Option<f64>,
+    /// Raster angle in degrees.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    angle: f64,
+    /// Merge collinear points within this distance, mm.
+    #[arg(long, default_value_t = 0.005)]
+    tolerance: f64,
+    /// Cutting feed, mm/min [default: 1000 or the machine's limit].
+    #[arg(long)]
+    feed: Option<f64>,
+    /// Plunge feed, mm/min [default: 300 or the machine's limit].
+    #[arg(long)]
+    plunge_feed: Option<f64>,
+    /// Spindle speed [default: 18000 within the machine's range].
+    #[arg(long)]
+    rpm: Option<f64>,
+    /// Travel height above the stock top, mm.
+    #[arg(long, default_value_t = 5.0)]
+    safe_z: f64,
+    /// Machine profile: grbl-generic, 3018, shapeoko, or a TOML file.
+    #[arg(long, default_value = "grbl-generic")]
+    machine: String,
+    /// Job origin on the panel.
+    #[arg(long, value_enum, default_value_t = relievo::cam::Origin::LowerLeft)]
+    origin: relievo::cam::Origin,
+}
+
+impl CutOpts {
+    fn job(
+        self,
+        output: PathBuf,
+        relief_name: String,
+    ) -> relievo::Result<relievo::cam::ToolpathJob> {
+        let m = relievo::machine::Machine::load(&self.machine)?;
+        let settings = relievo::gcode::emit::Settings {
+            feed: self
+                .feed
+                .unwrap_or(m.max_rate.x.min(m.max_rate.y).min(1000.0)),
+            plunge_feed: self.plunge_feed.unwrap_or(m.max_rate.z.min(300.0)),
+            rpm: self
+                .rpm
+                .unwrap_or(18000f64.clamp(m.spindle.min, m.spindle.max)),
+            safe_z: self.safe_z,
+            dwell: 2.0,
+        };
+        let tool = relievo::tool::Tool::parse(&self.tool)?;
+        let stepover = match self.scallop {
+            Some(h) => relievo::cam::Stepover::Scallop(h),
+            None => self.stepover,
+        };
+        Ok(relievo::cam::ToolpathJob {
+            tool,
+            stepover,
+            angle: self.angle,
+            tolerance: self.tolerance,
+            settings,
+            machine: self.machine,
+            origin: self.origin,
+            output,
+            relief_name,
+        })
+    }
+}
+
+fn report_cam(s: &relievo::cam::CamSummary, out: &std::path::Path, quiet: bool, verbose: bool) {
+    if !quiet {
+        eprintln!(
+            "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}",
+            out.display(),
+            s.lines,
+            s.raw_points,
+            s.stepover_mm,
+            relievo::sim::hms(s.time_s)
+        );
+    }
+    if verbose {
+        eprintln!(
+            "stage timings ({} threads):\n{}",
+            rayon::current_num_threads(),
+            s.timings.report()
+        );
+    }
 }
 
 #[derive(Args)]
@@ -105,6 +233,12 @@ struct ReliefArgs {
     /// Output relief: 16-bit PNG; a JSON sidecar is written beside it.
     #[arg(short, long, default_value = "relief.png")]
     output: PathBuf,
+    #[command(flatten)]
+    opts: ReliefOpts,
+}
+
+#[derive(Args)]
+struct ReliefOpts {
     /// View preset (where the eye is, seen from the model).
     #[arg(long, value_enum, default_value_t = View::Front)]
     view: View,
@@ -186,10 +320,10 @@ fn parse_emphasis(s: &str) -> Result<(String, f64), String> {
     Ok((name.to_string(), gain))
 }
 
-impl ReliefArgs {
-    fn job(self) -> ReliefJob {
+impl ReliefOpts {
+    fn job(self, model: Option<PathBuf>, output: PathBuf) -> ReliefJob {
         ReliefJob {
-            model: self.model,
+            model,
             camera: Camera {
                 view: self.view,
                 yaw: self.yaw,
@@ -211,7 +345,7 @@ impl ReliefArgs {
             mirror: self.mirror,
             invert: self.invert,
             method: self.method,
-            output: self.output,
+            output,
             stl: self.stl,
             base_mm: self.base,
             preview: self.preview,
@@ -233,8 +367,46 @@ fn spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
 fn run(cli: Cli) -> relievo::Result<()> {
     match cli.cmd {
         Cmd::Simulate(args) => simulate(args, cli.quiet, cli.verbose),
+        Cmd::Toolpath(args) => {
+            let relief = relievo::relief::file::load(&args.relief, args.width, args.depth)?;
+            let job = args
+                .cut
+                .job(args.output.clone(), args.relief.display().to_string())?;
+            let s = job.run(&relief)?;
+            report_cam(&s, &args.output, cli.quiet, cli.verbose);
+            Ok(())
+        }
+        Cmd::Carve(args) => {
+            let stem = args
+                .output
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or("job".into());
+            let relief_path = args.output.with_file_name(format!("{stem}-relief.png"));
+            let rjob = args.relief.job(args.model, relief_path.clone());
+            let cam = args
+                .cut
+                .job(args.output.clone(), relief_path.display().to_string())?;
+            relievo::output::check_writable(&args.output)?;
+            let r = rjob.run(&mut |_| {})?;
+            let s = match cam.run(&r.relief) {
+                Ok(s) => s,
+                Err(e) => {
+                    // all or nothing: no relief without its job
+                    for p in &r.written {
+                        let _ = std::fs::remove_file(p);
+                    }
+                    return Err(e);
+                }
+            };
+            if !cli.quiet {
+                eprintln!("relief -> {}", relief_path.display());
+            }
+            report_cam(&s, &args.output, cli.quiet, cli.verbose);
+            Ok(())
+        }
         Cmd::Relief(args) => {
-            let job = args.job();
+            let job = args.opts.job(args.model, args.output);
             let pb = spinner(cli.quiet);
             let mut stage = |s: &str| {
                 if let Some(pb) = &pb {

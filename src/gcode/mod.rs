@@ -2,6 +2,7 @@
 //! the sender, and the modal interpreter that turns a program into straight
 //! tool moves (arcs become chords within 0.1 micrometre).
 
+pub mod emit;
 pub mod parse;
 
 use crate::bail;

@@ -1,0 +1,155 @@
+//! Cutting passes: polylines of tool-tip (CL) points, refined where the
+//! straight move between two CL points would dip into the CL surface and
+//! thinned where points are collinear.
+
+use super::dropcutter::HeightField;
+use crate::tool::Tool;
+use glam::DVec3;
+
+/// How far a straight move may dip below the CL surface between two CL
+/// points before the gap is split (mm): the gouge budget of a pass.
+pub const DIP: f64 = 2e-4;
+/// How far it may pass above it (mm): left-over material, not a gouge.
+pub const RISE: f64 = 5e-3;
+/// How far a merged chord may pass below a dropped point (mm). With DIP
+/// this keeps every gouge of a finishing pass under 1 micrometre.
+pub const MERGE_DIP: f64 = 7e-4;
+
+/// Drop the tool along the XY polyline `xy` (points at most about one
+/// sample apart), splitting every gap whose chord leaves the CL surface by
+/// more than DIP below or RISE above at its middle. Points with no sample
+/// in reach sit at `floor`.
+pub fn drop_along(hf: &HeightField, tool: &Tool, xy: &[(f64, f64)], floor: f64) -> Vec<DVec3> {
+    let mut stack = Vec::new();
+    let mut hint = None;
+    let mut at = |x: f64, y: f64| -> DVec3 {
+        match hf.drop_from(tool, x, y, hint, &mut stack) {
+            Some((z, c)) => {
+                hint = Some(c);
+                DVec3::new(x, y, z.max(floor))
+            }
+            None => DVec3::new(x, y, floor),
+        }
+    };
+    let mut out: Vec<DVec3> = Vec::with_capacity(xy.len());
+    let min_gap = hf.pitch / 4096.0;
+    for &(x, y) in xy {
+        let p = at(x, y);
+        if let Some(&prev) = out.last() {
+            // refine the gap prev -> p (depth-first, in order)
+            let mut todo = vec![(prev, p)];
+            while let Some((a, b)) = todo.pop() {
+                let gap = (b - a).truncate().length();
+                if gap > min_gap {
+                    // the CL surface bends at sub-sample scale (the contact
+                    // hops between samples): test the quarter points too
+                    let mut split = None;
+                    for f in [0.5, 0.25, 0.75] {
+                        let m = a + (b - a) * f;
+                        let c = at(m.x, m.y);
+                        if c.z - m.z > DIP || m.z - c.z > RISE {
+                            split = Some(if f == 0.5 {
+                                c
+                            } else {
+                                at((a.x + b.x) / 2.0, (a.y + b.y) / 2.0)
+                            });
+                            break;
+                        }
+                    }
+                    if let Some(c) = split {
+                        todo.push((c, b));
+                        todo.push((a, c));
+                        continue;
+                    }
+                }
+                out.push(b);
+            }
+        } else {
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// Replace runs of points by single moves where every dropped point lies
+/// within `tol` of the move. A move never passes below a dropped point:
+/// where it would, its end is lifted (by at most `tol`) until it clears
+/// them all, so merging adds no gouge, only up to `tol` of material left.
+/// Points of a pass are collinear in XY (a raster row), so a move above
+/// every dropped point is above the whole dropped polyline.
+pub fn merge(points: &[DVec3], tol: f64) -> Vec<DVec3> {
+    if points.len() < 3 {
+        return points.to_vec();
+    }
+    // the lift the end of a -> e needs to clear the points between
+    let lift = |a: DVec3, e: DVec3, mid: &[DVec3]| -> Option<f64> {
+        let d = e - a;
+        let dxy = d.truncate().length_squared();
+        let mut need = 0.0f64;
+        for &p in mid {
+            if dxy == 0.0 {
+                return None;
+            }
+            let s = (p - a).truncate().dot(d.truncate()) / dxy;
+            if s <= 0.0 || s > 1.0 {
+                return None;
+            }
+            need = need.max((p.z - a.z) / s - d.z);
+        }
+        let e = DVec3::new(e.x, e.y, e.z + need);
+        let d = e - a;
+        let near = mid.iter().all(|&p| {
+            let t = ((p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+            (p - (a + d * t)).length() <= tol
+        });
+        (need <= tol && near).then_some(need)
+    };
+    let mut out = vec![points[0]];
+    let mut anchor = points[0];
+    let mut start = 0; // index of the anchor's original point
+    let mut k = 2;
+    let mut pending = points[1];
+    while k < points.len() {
+        match lift(anchor, points[k], &points[start + 1..k]) {
+            Some(l) => {
+                pending = DVec3::new(points[k].x, points[k].y, points[k].z + l);
+                k += 1;
+            }
+            None => {
+                out.push(pending);
+                anchor = pending;
+                start = k - 1;
+                pending = points[k];
+                k += 1;
+            }
+        }
+    }
+    out.push(pending);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn merge_keeps_corners_and_drops_collinear_points() {
+        let pts: Vec<DVec3> = (0..=100)
+            .map(|i| {
+                let x = i as f64 * 0.1;
+                DVec3::new(
+                    x,
+                    0.0,
+                    if x < 5.0 {
+                        -x * 0.1
+                    } else {
+                        -0.5 + (x - 5.0) * 0.2
+                    },
+                )
+            })
+            .collect();
+        let m = merge(&pts, 0.005);
+        assert_eq!(m.len(), 3, "{m:?}");
+        assert!((m[1].x - 5.0).abs() < 1e-9);
+    }
+}
