@@ -105,11 +105,8 @@ impl ToolpathJob {
             bail!("--tolerance {}: must be in (0, 1] mm", self.tolerance);
         }
         let s = &self.settings;
-        if !(s.safe_z > 0.0 && s.safe_z.is_finite())
-            || !(s.feed > 0.0)
-            || !(s.plunge_feed > 0.0)
-            || !(s.rpm >= 0.0)
-        {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !(positive(s.safe_z) && positive(s.feed) && positive(s.plunge_feed) && s.rpm >= 0.0) {
             bail!("--safe-z, --feed and --plunge-feed must be positive and --rpm >= 0");
         }
         let m = Machine::load(&self.machine)?;
