@@ -153,3 +153,52 @@ mod tests {
         assert!((m[1].x - 5.0).abs() < 1e-9);
     }
 }
+
+#[cfg(test)]
+mod merge_tests {
+    use super::*;
+
+    /// On a wavy row: every original point lies within tol of the merged
+    /// path, and the merged path is never below the original one.
+    #[test]
+    fn merged_path_stays_within_tolerance_and_above() {
+        let pts: Vec<DVec3> = (0..2000)
+            .map(|i| {
+                let x = i as f64 * 0.01;
+                DVec3::new(
+                    x,
+                    3.0,
+                    -1.0 + 0.3 * (x * 1.7).sin()
+                        + 0.05 * (x * 9.0).cos()
+                        + if x > 10.0 { 0.2 } else { 0.0 },
+                )
+            })
+            .collect();
+        for tol in [0.001, 0.005, 0.05] {
+            let m = merge(&pts, tol);
+            assert!(
+                m.len() * 5 < pts.len(),
+                "tol {tol}: {} of {}",
+                m.len(),
+                pts.len()
+            );
+            let mut seg = 0;
+            for p in &pts {
+                while seg + 1 < m.len() - 1 && m[seg + 1].x < p.x {
+                    seg += 1;
+                }
+                let (a, b) = (m[seg], m[seg + 1]);
+                let s = ((p.x - a.x) / (b.x - a.x)).clamp(0.0, 1.0);
+                let z = a.z + (b.z - a.z) * s;
+                assert!(
+                    z >= p.z - 1e-12,
+                    "merged path below the original at x {}",
+                    p.x
+                );
+                let d = b - a;
+                let t = ((*p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0);
+                assert!((*p - (a + d * t)).length() <= tol + 1e-12);
+            }
+        }
+    }
+}
