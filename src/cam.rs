@@ -167,9 +167,23 @@ impl ToolpathJob {
         let merged = t.time("merge", || path::merge(&cl, self.tolerance));
         let shift = match self.origin {
             Origin::LowerLeft => DVec3::ZERO,
-            Origin::Center => DVec3::new(-relief.width_mm / 2.0, -relief.height_mm / 2.0, 0.0),
+            Origin::Center => DVec3::new(
+                -path::snap(relief.width_mm / 2.0),
+                -path::snap(relief.height_mm / 2.0),
+                0.0,
+            ),
         };
-        let pts: Vec<DVec3> = merged.iter().map(|p| *p + shift).collect();
+        // on the G-code grid: XY as dropped, Z rounded up
+        let pts: Vec<DVec3> = merged
+            .iter()
+            .map(|p| {
+                DVec3::new(
+                    path::snap(p.x + shift.x),
+                    path::snap(p.y + shift.y),
+                    path::snap_up(p.z),
+                )
+            })
+            .collect();
         let header = vec![
             "relievo GRBL 1.1 job".to_string(),
             format!(

@@ -15,6 +15,21 @@ pub const RISE: f64 = 5e-3;
 /// this keeps every gouge of a finishing pass under 1 micrometre.
 pub const MERGE_DIP: f64 = 7e-4;
 
+/// The resolution of coordinates in the G-code (mm).
+pub const GRID: f64 = 1e-4;
+
+/// Round to the G-code grid.
+#[inline]
+pub fn snap(v: f64) -> f64 {
+    (v / GRID).round() * GRID
+}
+
+/// Round a height up to the G-code grid (never into the material).
+#[inline]
+pub fn snap_up(v: f64) -> f64 {
+    (v / GRID - 1e-6).ceil() * GRID
+}
+
 /// Drop the tool along the XY polyline `xy` (points at most about one
 /// sample apart), splitting every gap whose chord leaves the CL surface by
 /// more than DIP below or RISE above at its middle. Points with no sample
@@ -23,6 +38,10 @@ pub fn drop_along(hf: &HeightField, tool: &Tool, xy: &[(f64, f64)], floor: f64) 
     let mut stack = Vec::new();
     let mut hint = None;
     let mut at = |x: f64, y: f64| -> DVec3 {
+        // snap to the G-code's 0.1 um grid so the moves written are the
+        // moves checked: at a flat tool's rim 0.1 um sideways can mean a
+        // whole step up or down
+        let (x, y) = (snap(x), snap(y));
         match hf.drop_from(tool, x, y, hint, &mut stack) {
             Some((z, c)) => {
                 hint = Some(c);
@@ -32,7 +51,8 @@ pub fn drop_along(hf: &HeightField, tool: &Tool, xy: &[(f64, f64)], floor: f64) 
         }
     };
     let mut out: Vec<DVec3> = Vec::with_capacity(xy.len());
-    let min_gap = hf.pitch / 4096.0;
+    // below this the snapped midpoint would not split the gap
+    let min_gap = (hf.pitch / 4096.0).max(3.0 * GRID);
     for &(x, y) in xy {
         let p = at(x, y);
         if let Some(&prev) = out.last() {
@@ -61,6 +81,17 @@ pub fn drop_along(hf: &HeightField, tool: &Tool, xy: &[(f64, f64)], floor: f64) 
                         todo.push((a, c));
                         continue;
                     }
+                } else if (b.z - a.z).abs() > DIP {
+                    // still steep at the finest gap: a jump in the CL
+                    // surface (a flat or V tool's rim meeting a sample).
+                    // Step over it on the higher side: up first, or
+                    // across first and down last; never diagonally.
+                    let corner = if b.z > a.z {
+                        DVec3::new(a.x, a.y, b.z)
+                    } else {
+                        DVec3::new(b.x, b.y, a.z)
+                    };
+                    out.push(corner);
                 }
                 out.push(b);
             }
