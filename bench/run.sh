@@ -29,3 +29,6 @@ if python3 -c 'import numpy, PIL' 2>/dev/null; then
   python3 bench/make_finish_job.py "$T/sq.png" "$T/finish.nc" 4
   wall $R -v simulate "$T/finish.nc" --relief "$T/sq.png" --stock 100x100x8 -o "$T/cut.png" --report "$T/report.json"
 fi
+
+echo "== toolpath: 2048 px, 100 mm relief, 3.175 ball, 10% stepover raster (CL + path + G-code)"
+wall $R -v toolpath "$T/sq.png" -o "$T/finish-cam.nc" --machine shapeoko
