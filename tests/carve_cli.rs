@@ -76,22 +76,8 @@ fn check(name: &str, model: Option<&str>, res: &str, merge_ratio: bool) {
             "unexpected word in '{l}'"
         );
     }
-    let (cut, rep) = (d.join("cut.png"), d.join("r.json"));
-    ok(&run(&[
-        "simulate",
-        job.to_str().unwrap(),
-        "--relief",
-        relief.to_str().unwrap(),
-        "--machine",
-        "shapeoko",
-        "-o",
-        cut.to_str().unwrap(),
-        "--report",
-        rep.to_str().unwrap(),
-        "-q",
-    ]));
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+    let cut = d.join("cut.png");
+    let report = simulate_report(&job, &relief, &cut, &["--machine", "shapeoko"]);
     let gouge = report["max_gouge_mm"].as_f64().unwrap();
     assert!(gouge <= 0.001, "{name}: gouge {gouge} mm");
     assert_eq!(report["rapids_in_stock"].as_array().unwrap().len(), 0);

@@ -23,23 +23,9 @@ fn simulate(
 ) -> (usize, usize, Vec<f64>, serde_json::Value) {
     let nc = dir.join("job.nc");
     std::fs::write(&nc, job).unwrap();
-    let (cut, rep) = (dir.join("cut.png"), dir.join("report.json"));
-    ok(&run(&[
-        "simulate",
-        nc.to_str().unwrap(),
-        "--relief",
-        relief.to_str().unwrap(),
-        "--tool",
-        tool,
-        "-o",
-        cut.to_str().unwrap(),
-        "--report",
-        rep.to_str().unwrap(),
-        "-q",
-    ]));
+    let cut = dir.join("cut.png");
+    let report = simulate_report(&nc, relief, &cut, &["--tool", tool]);
     let (w, h, mm, depth) = relief_mm(&cut);
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(rep).unwrap()).unwrap();
     (w, h, mm.iter().map(|v| v - depth).collect(), report)
 }
 
@@ -236,22 +222,10 @@ fn a_known_good_cut_shifted_down_gouges_by_the_shift() {
         s
     };
     let nc = d.join("good.nc");
-    let (cut, rep) = (d.join("cut.png"), d.join("r.json"));
+    let cut = d.join("cut.png");
     for (shift, name) in [(0.0, "good"), (-0.1, "shifted")] {
         std::fs::write(&nc, job(shift)).unwrap();
-        ok(&run(&[
-            "simulate",
-            nc.to_str().unwrap(),
-            "--relief",
-            relief.to_str().unwrap(),
-            "-o",
-            cut.to_str().unwrap(),
-            "--report",
-            rep.to_str().unwrap(),
-            "-q",
-        ]));
-        let report: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&rep).unwrap()).unwrap();
+        let report = simulate_report(&nc, &relief, &cut, &[]);
         let gouge = report["max_gouge_mm"].as_f64().unwrap();
         eprintln!(
             "{name}: gouge {gouge:.5} mm, residual max {:.4}",

@@ -68,3 +68,21 @@ pub fn ok(out: &Output) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// Run `simulate JOB --relief RELIEF -o CUT --report` (plus `extra`) and
+/// return the JSON report.
+pub fn simulate_report(job: &Path, relief: &Path, cut: &Path, extra: &[&str]) -> serde_json::Value {
+    let rep = cut.with_file_name("report.json");
+    let mut args = vec![
+        "simulate",
+        job.to_str().unwrap(),
+        "--relief",
+        relief.to_str().unwrap(),
+        "-o",
+        cut.to_str().unwrap(),
+    ];
+    args.extend(["--report", rep.to_str().unwrap(), "-q"]);
+    args.extend(extra);
+    ok(&run(&args));
+    serde_json::from_str(&std::fs::read_to_string(rep).unwrap()).unwrap()
+}
