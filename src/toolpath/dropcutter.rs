@@ -95,10 +95,9 @@ impl HeightField {
         x: f64,
         y: f64,
         hint: Option<(usize, usize)>,
-        stack: &mut Vec<(usize, usize, usize)>,
+        stack: &mut Vec<(f64, usize, usize, usize)>,
     ) -> Option<(f64, (usize, usize))> {
         let r = tool.radius();
-        let top = self.levels.len() - 1;
         let mut best = f64::NEG_INFINITY;
         let mut contact = (0, 0);
         if let Some((i, j)) = hint {
@@ -106,20 +105,38 @@ impl HeightField {
                 (best, contact) = (z, (i, j));
             }
         }
+        // start at the level whose blocks are about the footprint's size,
+        // with the (few) blocks the footprint's bounding box touches
+        let reach = (2.0 * r / self.pitch).max(1.0);
+        let start = (reach.log2().ceil() as usize).min(self.levels.len() - 1);
+        let s = (1usize << start) as f64 * self.pitch;
+        let base = &self.levels[start];
+        let bx0 = (((x - r) / s).floor().max(0.0) as usize).min(base.w - 1);
+        let bx1 = (((x + r) / s).floor().max(0.0) as usize).min(base.w - 1);
+        let by0 = ((((self.top - y) - r) / s).floor().max(0.0) as usize).min(base.h - 1);
+        let by1 = ((((self.top - y) + r) / s).floor().max(0.0) as usize).min(base.h - 1);
         stack.clear();
-        stack.push((top, 0, 0));
-        while let Some((level, bx, by)) = stack.pop() {
-            if level == 0 {
-                if let Some(z) = self.contribution(tool, bx, by, x, y) {
-                    if z > best {
-                        (best, contact) = (z, (bx, by));
-                    }
+        for by in by0..=by1 {
+            for bx in bx0..=bx1 {
+                let d = self.block_distance(start, bx, by, x, y);
+                if d <= r {
+                    stack.push((base.get(bx, by) - tool.profile(d), start, bx, by));
                 }
+            }
+        }
+        stack.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        while let Some((bound, level, bx, by)) = stack.pop() {
+            if bound <= best {
+                continue;
+            }
+            if level == 0 {
+                // the bound of a single sample is its contribution
+                (best, contact) = (bound, (bx, by));
                 continue;
             }
             // children, most promising last so they are searched first
             let child = &self.levels[level - 1];
-            let mut kids = [(0.0f64, 0usize, 0usize); 4];
+            let mut kids = [(0.0f64, 0usize, 0usize, 0usize); 4];
             let mut nk = 0;
             for (cx, cy) in [
                 (2 * bx, 2 * by),
@@ -134,22 +151,14 @@ impl HeightField {
                 if d > r {
                     continue;
                 }
-                let bound = child.get(cx, cy) - tool.profile(d);
-                if bound > best {
-                    kids[nk] = (bound, cx, cy);
+                let b = child.get(cx, cy) - tool.profile(d);
+                if b > best {
+                    kids[nk] = (b, level - 1, cx, cy);
                     nk += 1;
                 }
             }
             kids[..nk].sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-            stack.extend(kids[..nk].iter().map(|&(_, cx, cy)| (level - 1, cx, cy)));
-            // prune what a better best has made hopeless on the way down
-            while let Some(&(l, cx, cy)) = stack.last() {
-                let d = self.block_distance(l, cx, cy, x, y);
-                if self.levels[l].get(cx, cy) - tool.profile(d) > best {
-                    break;
-                }
-                stack.pop();
-            }
+            stack.extend_from_slice(&kids[..nk]);
         }
         best.is_finite().then_some((best, contact))
     }
