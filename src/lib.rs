@@ -20,5 +20,6 @@ pub mod gcode;
 pub mod machine;
 pub mod sim;
 pub mod simulate;
+pub mod sweep;
 pub mod tool;
 pub mod toolpath;
