@@ -165,6 +165,7 @@ impl ToolpathJob {
         });
         let raw_points = cl.len();
         let merged = t.time("merge", || path::merge(&cl, self.tolerance));
+        let merged = t.time("check", || path::verify(&hf, &self.tool, &merged));
         let shift = match self.origin {
             Origin::LowerLeft => DVec3::ZERO,
             Origin::Center => DVec3::new(

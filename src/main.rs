@@ -71,7 +71,7 @@ struct CarveArgs {
 
 #[derive(Args)]
 struct CutOpts {
-    /// ball:D (verified gouge-free); flat:D, vbit:ANGLE[:D], taperball:R:ANGLE[:D] work but a flat's rim can still nick by a few um.
+    /// ball:D, flat:D, vbit:ANGLE[:D] or taperball:TIP_RADIUS:HALF_ANGLE[:D].
     #[arg(long, default_value = "ball:3.175")]
     tool: String,
     /// Distance between rows: MM or PERCENT% of the tool diameter.

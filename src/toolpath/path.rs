@@ -233,3 +233,65 @@ mod merge_tests {
         }
     }
 }
+
+/// Cut a single move may make below any sample before the final check
+/// raises it (mm).
+pub const CHECK: f64 = 2e-4;
+
+/// How deep the straight move a -> b would cut below the samples it passes
+/// over (<= 0 when it cuts none), with the exact swept tool.
+pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
+    let sw = crate::sweep::Sweep::new(a, b, *tool);
+    let z = hf.samples();
+    let p = hf.pitch;
+    let r = tool.radius();
+    let (ylo, yhi) = (a.y.min(b.y) - r, a.y.max(b.y) + r);
+    let j0 = ((hf.top - yhi) / p - 0.5).ceil().max(0.0) as usize;
+    let j1 = ((hf.top - ylo) / p - 0.5).floor().min(z.h as f64 - 1.0);
+    let mut worst = f64::NEG_INFINITY;
+    if j1 < 0.0 {
+        return worst;
+    }
+    for j in j0..=j1 as usize {
+        let (_, y) = hf.centre(0, j);
+        let Some((xl, xh)) = sw.row_span(y) else {
+            continue;
+        };
+        let i0 = (xl / p - 0.5).ceil().max(0.0) as usize;
+        let i1 = (xh / p - 0.5).floor().min(z.w as f64 - 1.0);
+        if i1 < 0.0 {
+            continue;
+        }
+        for i in i0..=i1 as usize {
+            let (x, _) = hf.centre(i, j);
+            worst = worst.max(z.get(i, j) - sw.lowest(x - a.x, y - a.y));
+        }
+    }
+    worst
+}
+
+/// The final check: every move is swept exactly over the samples it
+/// passes; one that would cut deeper than CHECK is raised by what it would
+/// cut (up at its start, across, down onto its end), which leaves a little
+/// material but never gouges. Catches what refinement between CL points
+/// cannot see, such as a sample meeting a flat tool's rim between checks.
+pub fn verify(hf: &HeightField, tool: &Tool, pts: &[DVec3]) -> Vec<DVec3> {
+    use rayon::prelude::*;
+    if pts.len() < 2 {
+        return pts.to_vec();
+    }
+    let gouges: Vec<f64> = pts
+        .par_windows(2)
+        .map(|w| move_gouge(hf, tool, w[0], w[1]))
+        .collect();
+    let mut out = vec![pts[0]];
+    for (w, &g) in pts.windows(2).zip(&gouges) {
+        if g > CHECK {
+            let up = DVec3::new(0.0, 0.0, snap_up(g + GRID));
+            out.push(w[0] + up);
+            out.push(w[1] + up);
+        }
+        out.push(w[1]);
+    }
+    out
+}
