@@ -187,3 +187,40 @@ fn spot_raster_finish_is_clean() {
     // merging ratio is owed there
     check("carve-spot", Some(&fixture("spot.obj")), "400", false);
 }
+
+/// Flat and V finishing: no gouge either (the final exact check catches
+/// samples meeting a flat's rim between CL points). The tapered ball works
+/// too but its sweep is a numeric search, too slow for the suite (18 s).
+#[test]
+fn other_tools_finish_without_gouging() {
+    let d = scratch("carve-tools");
+    for tool in ["flat:2", "vbit:60:6"] {
+        let job = d.join("job.nc");
+        ok(&run(&[
+            "carve",
+            "--resolution",
+            "160",
+            "--width",
+            "60",
+            "--depth",
+            "3",
+            "--tool",
+            tool,
+            "--machine",
+            "shapeoko",
+            "-o",
+            job.to_str().unwrap(),
+            "-q",
+        ]));
+        let report = simulate_report(
+            &job,
+            &d.join("job-relief.png"),
+            &d.join("cut.png"),
+            &["--machine", "shapeoko"],
+        );
+        let gouge = report["max_gouge_mm"].as_f64().unwrap();
+        eprintln!("{tool}: gouge {gouge:.5} mm");
+        assert!(gouge <= 0.001, "{tool}: gouge {gouge} mm");
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}
