@@ -38,10 +38,6 @@ impl<T: Clone + Send + Sync> Grid<T> {
         self.data[i] = v;
     }
 
-    pub fn row(&self, y: usize) -> &[T] {
-        &self.data[y * self.w..(y + 1) * self.w]
-    }
-
     pub fn map<U: Clone + Send + Sync>(&self, f: impl Fn(&T) -> U + Sync + Send) -> Grid<U> {
         use rayon::prelude::*;
         Grid {
@@ -56,42 +52,6 @@ impl<T: Clone + Send + Sync> Grid<T> {
         for y in 0..self.h {
             self.data[y * self.w..(y + 1) * self.w].reverse();
         }
-    }
-}
-
-impl Grid<f32> {
-    /// (min, max) over all samples; (0, 0) for an empty grid.
-    pub fn min_max(&self) -> (f32, f32) {
-        let mut lo = f32::INFINITY;
-        let mut hi = f32::NEG_INFINITY;
-        for &v in &self.data {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-        if lo > hi {
-            (0.0, 0.0)
-        } else {
-            (lo, hi)
-        }
-    }
-
-    /// Box-average down by an integer factor (the size must divide).
-    pub fn downsample(&self, f: usize) -> Grid<f32> {
-        let (w, h) = (self.w / f, self.h / f);
-        let mut out = Grid::new(w, h, 0.0f32);
-        let norm = 1.0 / (f * f) as f32;
-        for y in 0..h {
-            for x in 0..w {
-                let mut s = 0.0;
-                for dy in 0..f {
-                    for dx in 0..f {
-                        s += self.get(x * f + dx, y * f + dy);
-                    }
-                }
-                out.set(x, y, s * norm);
-            }
-        }
-        out
     }
 }
 

@@ -64,23 +64,25 @@ impl Relief {
 /// Scale a solved height field linearly so that max - min = depth and the
 /// lowest point is 0.
 fn to_mm(h: &Grid<f64>, depth: f64) -> Grid<f32> {
-    let (lo, hi) = h
-        .data
-        .par_iter()
-        .fold(|| (f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)))
-        .reduce(|| (f64::MAX, f64::MIN), |x, y| (x.0.min(y.0), x.1.max(y.1)));
+    let (lo, hi) = extent(h.data.par_iter().copied());
     let k = if hi > lo { depth / (hi - lo) } else { 0.0 };
     h.map(|v| ((v - lo) * k) as f32)
 }
 
+/// (min, max) of a parallel stream of values.
+fn extent(v: impl ParallelIterator<Item = f64>) -> (f64, f64) {
+    v.fold(|| (f64::MAX, f64::MIN), |(l, h), x| (l.min(x), h.max(x)))
+        .reduce(|| (f64::MAX, f64::MIN), |x, y| (x.0.min(y.0), x.1.max(y.1)))
+}
+
+/// Range (max - min) of a + c b.
 fn range(a: &Grid<f64>, b: &Grid<f64>, c: f64) -> f64 {
-    let (lo, hi) = a
-        .data
-        .par_iter()
-        .zip(b.data.par_iter())
-        .map(|(x, y)| x + c * y)
-        .fold(|| (f64::MAX, f64::MIN), |(l, h), v| (l.min(v), h.max(v)))
-        .reduce(|| (f64::MAX, f64::MIN), |x, y| (x.0.min(y.0), x.1.max(y.1)));
+    let (lo, hi) = extent(
+        a.data
+            .par_iter()
+            .zip(b.data.par_iter())
+            .map(|(x, y)| x + c * y),
+    );
     hi - lo
 }
 

@@ -19,12 +19,6 @@ pub struct DepthMap {
     pub objects: Vec<String>,
 }
 
-impl DepthMap {
-    pub fn is_background(&self, i: usize) -> bool {
-        self.id.data[i] == 0
-    }
-}
-
 /// One triangle ready to scan: vertices in fixed point, counter-oriented so
 /// that the inside has positive edge values.
 struct Setup {
