@@ -15,7 +15,7 @@ use crate::gcode::{Kind, Program, Segment};
 use crate::grid::Grid;
 use crate::machine::Machine;
 use crate::relief::Relief;
-use crate::sweep::Sweep;
+use crate::sweep::{cells_between, Sweep};
 use crate::tool::Tool;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -111,18 +111,7 @@ const TOUCH: f64 = 1e-4;
 #[inline]
 fn cells_in(stock: &Stock, w: usize, span: Option<(f64, f64)>) -> Option<(usize, usize)> {
     let (xl, xh) = span?;
-    let (fl, fh) = (
-        (xl - stock.x0) / stock.pitch - 0.5,
-        (xh - stock.x0) / stock.pitch - 0.5,
-    );
-    if !(fh >= 0.0 && fl <= w as f64 - 1.0) {
-        return None;
-    }
-    // truncation is floor for the non-negative values left after clamping
-    let i1 = fh.min(w as f64 - 1.0) as usize;
-    let fl = fl.max(0.0);
-    let i0 = fl as usize + (fl > (fl as usize) as f64) as usize;
-    (i0 <= i1).then_some((i0, i1))
+    cells_between(xl - stock.x0, xh - stock.x0, stock.pitch, w)
 }
 
 /// Ball end on a feed move, the hot path: the end sphere (and the start
@@ -253,21 +242,15 @@ pub fn cut(stock: &Stock, heights: &mut Grid<f32>, prog: &Program, tool: Tool) -
     let (w, h) = (heights.w, heights.h);
     let p = stock.pitch;
     let r = tool.radius();
-    let row_of = |y: f64| (stock.y0 + stock.height - y) / p - 0.5;
+    let top = stock.y0 + stock.height;
     let nb = h.div_ceil(BAND);
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nb];
     for (k, s) in prog.segments.iter().enumerate() {
         let (ylo, yhi) = (s.a.y.min(s.b.y) - r, s.a.y.max(s.b.y) + r);
-        let j0 = row_of(yhi).ceil().max(0.0);
-        let j1 = row_of(ylo).floor().min(h as f64 - 1.0);
-        if j0 > j1 {
+        let Some((j0, j1)) = cells_between(top - yhi, top - ylo, p, h) else {
             continue;
-        }
-        for bin in bins
-            .iter_mut()
-            .take(j1 as usize / BAND + 1)
-            .skip(j0 as usize / BAND)
-        {
+        };
+        for bin in bins.iter_mut().take(j1 / BAND + 1).skip(j0 / BAND) {
             bin.push(k as u32);
         }
     }

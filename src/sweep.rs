@@ -8,6 +8,22 @@
 use crate::tool::Tool;
 use glam::DVec3;
 
+/// Indices i < n of cells whose centres ((i + 0.5) pitch from the grid's
+/// edge) lie in [lo, hi] (mm from that edge): the cells of one row a
+/// footprint span covers, or the rows a band of Y covers.
+#[inline]
+pub fn cells_between(lo: f64, hi: f64, pitch: f64, n: usize) -> Option<(usize, usize)> {
+    let (fl, fh) = (lo / pitch - 0.5, hi / pitch - 0.5);
+    if !(fh >= 0.0 && fl <= n as f64 - 1.0) {
+        return None;
+    }
+    // truncation is floor for the non-negative values left after clamping
+    let i1 = fh.min(n as f64 - 1.0) as usize;
+    let fl = fl.max(0.0);
+    let i0 = fl as usize + (fl > (fl as usize) as f64) as usize;
+    (i0 <= i1).then_some((i0, i1))
+}
+
 /// The lowest point of the swept tool surface over a cell at offset w from
 /// the move's start (XY), or +inf when the tool does not reach it.
 pub struct Sweep {

@@ -241,28 +241,25 @@ pub const CHECK: f64 = 2e-4;
 /// How deep the straight move a -> b would cut below the samples it passes
 /// over (<= 0 when it cuts none), with the exact swept tool.
 pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
-    let sw = crate::sweep::Sweep::new(a, b, *tool);
+    use crate::sweep::{cells_between, Sweep};
+    let sw = Sweep::new(a, b, *tool);
     let z = hf.samples();
     let p = hf.pitch;
     let r = tool.radius();
     let (ylo, yhi) = (a.y.min(b.y) - r, a.y.max(b.y) + r);
-    let j0 = ((hf.top - yhi) / p - 0.5).ceil().max(0.0) as usize;
-    let j1 = ((hf.top - ylo) / p - 0.5).floor().min(z.h as f64 - 1.0);
     let mut worst = f64::NEG_INFINITY;
-    if j1 < 0.0 {
+    let Some((j0, j1)) = cells_between(hf.top - yhi, hf.top - ylo, p, z.h) else {
         return worst;
-    }
-    for j in j0..=j1 as usize {
+    };
+    for j in j0..=j1 {
         let (_, y) = hf.centre(0, j);
-        let Some((xl, xh)) = sw.row_span(y) else {
+        let Some((i0, i1)) = sw
+            .row_span(y)
+            .and_then(|(xl, xh)| cells_between(xl, xh, p, z.w))
+        else {
             continue;
         };
-        let i0 = (xl / p - 0.5).ceil().max(0.0) as usize;
-        let i1 = (xh / p - 0.5).floor().min(z.w as f64 - 1.0);
-        if i1 < 0.0 {
-            continue;
-        }
-        for i in i0..=i1 as usize {
+        for i in i0..=i1 {
             let (x, _) = hf.centre(i, j);
             worst = worst.max(z.get(i, j) - sw.lowest(x - a.x, y - a.y));
         }
