@@ -80,7 +80,14 @@ pub struct ToolpathJob {
     pub angle: f64,
     /// Merge tolerance, mm.
     pub tolerance: f64,
-    pub settings: Settings,
+    /// Cutting feed, mm/min; `None` = 1000 within the machine's XY limit.
+    pub feed: Option<f64>,
+    /// Plunge feed, mm/min; `None` = 300 within the machine's Z limit.
+    pub plunge_feed: Option<f64>,
+    /// Spindle speed; `None` = 18000 within the machine's range.
+    pub rpm: Option<f64>,
+    /// Travel height above the stock top, mm.
+    pub safe_z: f64,
     pub machine: String,
     pub origin: Origin,
     pub output: PathBuf,
@@ -104,12 +111,23 @@ impl ToolpathJob {
         if !(self.tolerance > 0.0 && self.tolerance <= 1.0) {
             bail!("--tolerance {}: must be in (0, 1] mm", self.tolerance);
         }
-        let s = &self.settings;
+        let m = Machine::load(&self.machine)?;
+        let settings = Settings {
+            feed: self
+                .feed
+                .unwrap_or(m.max_rate.x.min(m.max_rate.y).min(1000.0)),
+            plunge_feed: self.plunge_feed.unwrap_or(m.max_rate.z.min(300.0)),
+            rpm: self
+                .rpm
+                .unwrap_or(18000f64.clamp(m.spindle.min, m.spindle.max)),
+            safe_z: self.safe_z,
+            dwell: 2.0,
+        };
+        let s = &settings;
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !(positive(s.safe_z) && positive(s.feed) && positive(s.plunge_feed) && s.rpm >= 0.0) {
             bail!("--safe-z, --feed and --plunge-feed must be positive and --rpm >= 0");
         }
-        let m = Machine::load(&self.machine)?;
         // refuse what the machine cannot do, before any work
         let rate = m.max_rate.x.min(m.max_rate.y);
         if s.feed > rate || s.plunge_feed > m.max_rate.z {

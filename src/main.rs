@@ -112,18 +112,6 @@ impl CutOpts {
         output: PathBuf,
         relief_name: String,
     ) -> relievo::Result<relievo::cam::ToolpathJob> {
-        let m = relievo::machine::Machine::load(&self.machine)?;
-        let settings = relievo::gcode::emit::Settings {
-            feed: self
-                .feed
-                .unwrap_or(m.max_rate.x.min(m.max_rate.y).min(1000.0)),
-            plunge_feed: self.plunge_feed.unwrap_or(m.max_rate.z.min(300.0)),
-            rpm: self
-                .rpm
-                .unwrap_or(18000f64.clamp(m.spindle.min, m.spindle.max)),
-            safe_z: self.safe_z,
-            dwell: 2.0,
-        };
         let tool = relievo::tool::Tool::parse(&self.tool)?;
         let stepover = match self.scallop {
             Some(h) => relievo::cam::Stepover::Scallop(h),
@@ -134,7 +122,10 @@ impl CutOpts {
             stepover,
             angle: self.angle,
             tolerance: self.tolerance,
-            settings,
+            feed: self.feed,
+            plunge_feed: self.plunge_feed,
+            rpm: self.rpm,
+            safe_z: self.safe_z,
             machine: self.machine,
             origin: self.origin,
             output,
