@@ -39,6 +39,17 @@ pub struct Machine {
     /// Acceleration per axis, mm/s^2.
     pub acceleration: Axes,
     pub spindle: Spindle,
+    /// The tool table: `--tool T2` finds its spec here.
+    #[serde(default)]
+    pub tools: std::collections::BTreeMap<String, ToolEntry>,
+}
+
+#[derive(Deserialize, Debug, Clone, PartialEq)]
+pub struct ToolEntry {
+    /// A tool spec as `--tool` takes it.
+    pub tool: String,
+    #[serde(default)]
+    pub name: String,
 }
 
 const BUILTIN: [(&str, &str); 3] = [
@@ -74,7 +85,27 @@ impl Machine {
         if !pos(m.junction_deviation) || m.rx_buffer < 16 {
             bail!("{name_or_path}: junction_deviation must be positive and rx_buffer at least 16");
         }
+        for (k, t) in &m.tools {
+            crate::tool::Tool::parse(&t.tool).ctx(format!("{name_or_path}: tool {k}"))?;
+        }
         Ok(m)
+    }
+
+    /// A tool from the table by name (case-insensitive), else a spec.
+    pub fn tool(&self, spec: &str) -> Result<crate::tool::Tool> {
+        let hit = self
+            .tools
+            .iter()
+            .find(|(k, _)| k.eq_ignore_ascii_case(spec));
+        match hit {
+            Some((_, t)) => crate::tool::Tool::parse(&t.tool),
+            None if !spec.contains(':') && !self.tools.is_empty() => bail!(
+                "tool '{spec}': not a tool spec (ball:D, flat:D, ...) nor in {}'s tool table ({})",
+                self.name,
+                self.tools.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+            None => crate::tool::Tool::parse(spec),
+        }
     }
 }
 
@@ -85,6 +116,9 @@ mod tests {
         for n in ["grbl-generic", "3018", "shapeoko"] {
             let m = super::Machine::load(n).unwrap();
             assert_eq!(m.rx_buffer, 128);
+            assert!(m.tools.len() >= 3, "{n}");
+            assert_eq!(m.tool("t1").unwrap(), m.tool(&m.tools["T1"].tool).unwrap());
+            assert!(m.tool("T99").unwrap_err().0.contains("T1"));
         }
         assert!(super::Machine::load("nonesuch").is_err());
     }

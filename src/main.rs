@@ -36,7 +36,7 @@ enum Cmd {
     /// Turn a relief into a GRBL job (ball-end raster finishing).
     Toolpath(ToolpathArgs),
     /// Relief and toolpath in one call; without MODEL, the demo scene.
-    Carve(CarveArgs),
+    Carve(Box<CarveArgs>),
 }
 
 #[derive(Args)]
@@ -52,6 +52,9 @@ struct ToolpathArgs {
     /// Relief depth in mm, for a heightmap without sidecar.
     #[arg(long, allow_negative_numbers = true)]
     depth: Option<f64>,
+    /// Material preset for feeds, speeds, stepovers and step-downs.
+    #[arg(long)]
+    material: Option<String>,
     #[command(flatten)]
     cut: CutOpts,
 }
@@ -71,28 +74,62 @@ struct CarveArgs {
 
 #[derive(Args)]
 struct CutOpts {
-    /// ball:D, flat:D, vbit:ANGLE[:D] or taperball:TIP_RADIUS:HALF_ANGLE[:D].
+    /// Finishing tool: ball:D, flat:D, vbit:ANGLE[:D],
+    /// taperball:TIP_RADIUS:HALF_ANGLE[:D], or a name from the machine's
+    /// tool table (T1, T2, ...).
     #[arg(long, default_value = "ball:3.175")]
     tool: String,
-    /// Distance between rows: MM or PERCENT% of the tool diameter.
-    #[arg(long, default_value = "10%", value_parser = relievo::cam::Stepover::parse)]
-    stepover: relievo::cam::Stepover,
+    /// Finishing strategy.
+    #[arg(long, value_enum, default_value_t = relievo::cam::Finish::Raster)]
+    finish: relievo::cam::Finish,
+    /// Distance between rows (and waterline levels): MM or PERCENT% of the
+    /// tool diameter [default: the material's, else 10%].
+    #[arg(long, value_parser = relievo::cam::Stepover::parse)]
+    stepover: Option<relievo::cam::Stepover>,
     /// Scallop height in mm; sets the stepover for a ball.
     #[arg(long)]
     scallop: Option<f64>,
     /// Raster angle in degrees.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     angle: f64,
+    /// Climb milling: one-way rows, waterlines with the material on the
+    /// right [default: zigzag rows, climb waterlines].
+    #[arg(long, conflicts_with = "conventional")]
+    climb: bool,
+    /// Conventional milling: one-way rows, waterlines the other way round.
+    #[arg(long)]
+    conventional: bool,
+    /// Rough first with this tool (flat:D or ball:D, or a tool-table name).
+    #[arg(long)]
+    rough: Option<String>,
+    /// Roughing layer depth, mm [default: the material's, else the tool radius].
+    #[arg(long, requires = "rough")]
+    step_down: Option<f64>,
+    /// Roughing stepover, MM or PERCENT% [default: the material's, else 40%].
+    #[arg(long, requires = "rough", value_parser = relievo::cam::Stepover::parse)]
+    rough_stepover: Option<relievo::cam::Stepover>,
+    /// Material roughing leaves on the relief for the finish, mm.
+    #[arg(
+        long,
+        default_value_t = 0.3,
+        requires = "rough",
+        allow_negative_numbers = true
+    )]
+    stock_to_leave: f64,
+    /// Write the roughing to NAME-rough.nc instead of one job with an M0
+    /// tool change.
+    #[arg(long, requires = "rough")]
+    split: bool,
     /// Merge collinear points within this distance, mm.
     #[arg(long, default_value_t = 0.005)]
     tolerance: f64,
-    /// Cutting feed, mm/min [default: 1000 or the machine's limit].
+    /// Cutting feed, mm/min [default: the material's, else 1000; within the machine's limit].
     #[arg(long)]
     feed: Option<f64>,
-    /// Plunge feed, mm/min [default: 300 or the machine's limit].
+    /// Plunge feed, mm/min [default: the material's, else 300].
     #[arg(long)]
     plunge_feed: Option<f64>,
-    /// Spindle speed [default: 18000 within the machine's range].
+    /// Spindle speed [default: the material's, else 18000; within the machine's range].
     #[arg(long)]
     rpm: Option<f64>,
     /// Travel height above the stock top, mm.
@@ -104,6 +141,12 @@ struct CutOpts {
     /// Job origin on the panel.
     #[arg(long, value_enum, default_value_t = relievo::cam::Origin::LowerLeft)]
     origin: relievo::cam::Origin,
+    /// Also write a top view of the toolpath (SVG: cuts blue, rapids red).
+    #[arg(long)]
+    svg: Option<PathBuf>,
+    /// Also write the simulated cut, shaded (PNG).
+    #[arg(long)]
+    preview: Option<PathBuf>,
 }
 
 impl CutOpts {
@@ -111,15 +154,19 @@ impl CutOpts {
         self,
         output: PathBuf,
         relief_name: String,
-    ) -> relievo::Result<relievo::cam::ToolpathJob> {
-        let tool = relievo::tool::Tool::parse(&self.tool)?;
-        let stepover = match self.scallop {
-            Some(h) => relievo::cam::Stepover::Scallop(h),
-            None => self.stepover,
+        material: Option<String>,
+    ) -> relievo::cam::ToolpathJob {
+        use relievo::cam::{Direction, Roughing, Stepover};
+        let direction = match (self.climb, self.conventional) {
+            (true, _) => Some(Direction::Climb),
+            (_, true) => Some(Direction::Conventional),
+            _ => None,
         };
-        Ok(relievo::cam::ToolpathJob {
-            tool,
-            stepover,
+        relievo::cam::ToolpathJob {
+            tool: self.tool,
+            finish: self.finish,
+            direction,
+            stepover: self.scallop.map(Stepover::Scallop).or(self.stepover),
             angle: self.angle,
             tolerance: self.tolerance,
             feed: self.feed,
@@ -127,18 +174,32 @@ impl CutOpts {
             rpm: self.rpm,
             safe_z: self.safe_z,
             machine: self.machine,
+            material,
             origin: self.origin,
+            rough: self.rough.map(|tool| Roughing {
+                tool,
+                step_down: self.step_down,
+                stepover: self.rough_stepover,
+                stock_to_leave: self.stock_to_leave,
+            }),
+            split: self.split,
             output,
+            svg: self.svg,
+            preview: self.preview,
             relief_name,
-        })
+        }
     }
 }
 
-fn report_cam(s: &relievo::cam::CamSummary, out: &std::path::Path, quiet: bool, verbose: bool) {
+fn report_cam(s: &relievo::cam::CamSummary, quiet: bool, verbose: bool) {
     if !quiet {
         eprintln!(
             "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}",
-            out.display(),
+            s.written
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
             s.lines,
             s.raw_points,
             s.stepover_mm,
@@ -224,6 +285,9 @@ struct ReliefArgs {
     /// Output relief: 16-bit PNG; a JSON sidecar is written beside it.
     #[arg(short, long, default_value = "relief.png")]
     output: PathBuf,
+    /// Also write a shaded preview PNG.
+    #[arg(long)]
+    preview: Option<PathBuf>,
     #[command(flatten)]
     opts: ReliefOpts,
 }
@@ -293,9 +357,6 @@ struct ReliefOpts {
     /// Base thickness under the relief in the STL, mm.
     #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
     base: f64,
-    /// Also write a shaded preview PNG.
-    #[arg(long)]
-    preview: Option<PathBuf>,
     /// Also write the depth buffer (at relief resolution) as a 16-bit PNG.
     #[arg(long)]
     depth_out: Option<PathBuf>,
@@ -339,7 +400,7 @@ impl ReliefOpts {
             output,
             stl: self.stl,
             base_mm: self.base,
-            preview: self.preview,
+            preview: None,
             depth_out: self.depth_out,
         }
     }
@@ -360,11 +421,13 @@ fn run(cli: Cli) -> relievo::Result<()> {
         Cmd::Simulate(args) => simulate(args, cli.quiet, cli.verbose),
         Cmd::Toolpath(args) => {
             let relief = relievo::relief::file::load(&args.relief, args.width, args.depth)?;
-            let job = args
-                .cut
-                .job(args.output.clone(), args.relief.display().to_string())?;
+            let job = args.cut.job(
+                args.output.clone(),
+                args.relief.display().to_string(),
+                args.material,
+            );
             let s = job.run(&relief)?;
-            report_cam(&s, &args.output, cli.quiet, cli.verbose);
+            report_cam(&s, cli.quiet, cli.verbose);
             Ok(())
         }
         Cmd::Carve(args) => {
@@ -374,10 +437,13 @@ fn run(cli: Cli) -> relievo::Result<()> {
                 .map(|s| s.to_string_lossy().to_string())
                 .unwrap_or("job".into());
             let relief_path = args.output.with_file_name(format!("{stem}-relief.png"));
+            let material = args.relief.material.clone();
             let rjob = args.relief.job(args.model, relief_path.clone());
-            let cam = args
-                .cut
-                .job(args.output.clone(), relief_path.display().to_string())?;
+            let cam = args.cut.job(
+                args.output.clone(),
+                relief_path.display().to_string(),
+                material,
+            );
             relievo::output::check_writable(&args.output)?;
             let r = rjob.run(&mut |_| {})?;
             let s = match cam.run(&r.relief) {
@@ -393,11 +459,12 @@ fn run(cli: Cli) -> relievo::Result<()> {
             if !cli.quiet {
                 eprintln!("relief -> {}", relief_path.display());
             }
-            report_cam(&s, &args.output, cli.quiet, cli.verbose);
+            report_cam(&s, cli.quiet, cli.verbose);
             Ok(())
         }
         Cmd::Relief(args) => {
-            let job = args.opts.job(args.model, args.output);
+            let mut job = args.opts.job(args.model, args.output);
+            job.preview = args.preview;
             let pb = spinner(cli.quiet);
             let mut stage = |s: &str| {
                 if let Some(pb) = &pb {

@@ -17,6 +17,42 @@ pub struct Material {
     #[serde(default)]
     pub bands: Vec<f64>,
     pub alpha: Option<f64>,
+    /// Feeds and speeds by tool diameter.
+    #[serde(default)]
+    pub cutting: Vec<Cutting>,
+}
+
+/// Cutting data for one tool diameter.
+#[derive(Deserialize, Debug, Clone, PartialEq)]
+pub struct Cutting {
+    /// Tool diameter, mm.
+    pub d: f64,
+    /// mm/min.
+    pub feed: f64,
+    /// mm/min.
+    pub plunge: f64,
+    pub rpm: f64,
+    /// Roughing layer depth, mm.
+    pub step_down: f64,
+    /// Percent of the diameter.
+    pub rough_stepover: f64,
+    /// Percent of the diameter.
+    pub finish_stepover: f64,
+}
+
+impl Material {
+    /// The entry nearest diameter `d` (by ratio), step-down scaled to `d`.
+    pub fn cutting_for(&self, d: f64) -> Option<Cutting> {
+        let c = self.cutting.iter().min_by(|a, b| {
+            let ka = (a.d / d).ln().abs();
+            let kb = (b.d / d).ln().abs();
+            ka.total_cmp(&kb)
+        })?;
+        Some(Cutting {
+            step_down: c.step_down * d / c.d,
+            ..c.clone()
+        })
+    }
 }
 
 #[derive(Deserialize)]
@@ -52,6 +88,11 @@ mod tests {
         assert_eq!(super::find("wood").unwrap().depth_per_100mm, 3.2);
         assert_eq!(super::find("Silver").unwrap().depth_per_100mm, 0.88);
         assert_eq!(super::find("marble").unwrap().depth_per_100mm, 4.2);
+        let c = super::find("hardwood").unwrap().cutting_for(3.0).unwrap();
+        assert_eq!(c.d, 3.175);
+        for m in super::builtin().values() {
+            assert_eq!(m.cutting.len(), 3, "{}", m.description);
+        }
         assert!(super::find("cheese")
             .unwrap_err()
             .0

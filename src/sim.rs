@@ -236,16 +236,46 @@ fn ball_rows_body(
     }
 }
 
-/// Cut `stock` (top heights, row 0 = top) by every move of `prog` with
+/// Cut `stock` by every move of `prog`, each stretch with the tool its
+/// `(tool: SPEC)` comment names (a tool change starts a stretch), or with
+/// `tool` throughout. Returns the lines of rapids into stock and the last
+/// tool.
+pub fn cut_program(
+    stock: &Stock,
+    heights: &mut Grid<f32>,
+    prog: &Program,
+    tool: Option<Tool>,
+) -> crate::Result<(Vec<usize>, Tool)> {
+    let mut runs: Vec<(usize, Tool)> = match tool {
+        Some(t) => vec![(0, t)],
+        None => prog
+            .tools
+            .iter()
+            .map(|(k, s)| Tool::parse(s).map(|t| (*k, t)))
+            .collect::<crate::Result<_>>()?,
+    };
+    if runs.is_empty() {
+        crate::bail!("no tool given: use --tool or a (tool: SPEC) comment in the job");
+    }
+    runs[0].0 = 0;
+    let mut hits = Vec::new();
+    for (n, &(from, tool)) in runs.iter().enumerate() {
+        let to = runs.get(n + 1).map_or(prog.segments.len(), |t| t.0);
+        hits.extend(cut(stock, heights, &prog.segments[from.min(to)..to], tool));
+    }
+    Ok((hits, runs[runs.len() - 1].1))
+}
+
+/// Cut `stock` (top heights, row 0 = top) by the moves `segs` with
 /// `tool`. Returns the job lines of rapids that cut into stock.
-pub fn cut(stock: &Stock, heights: &mut Grid<f32>, prog: &Program, tool: Tool) -> Vec<usize> {
+pub fn cut(stock: &Stock, heights: &mut Grid<f32>, segs: &[Segment], tool: Tool) -> Vec<usize> {
     let (w, h) = (heights.w, heights.h);
     let p = stock.pitch;
     let r = tool.radius();
     let top = stock.y0 + stock.height;
     let nb = h.div_ceil(BAND);
     let mut bins: Vec<Vec<u32>> = vec![Vec::new(); nb];
-    for (k, s) in prog.segments.iter().enumerate() {
+    for (k, s) in segs.iter().enumerate() {
         let (ylo, yhi) = (s.a.y.min(s.b.y) - r, s.a.y.max(s.b.y) + r);
         let Some((j0, j1)) = cells_between(top - yhi, top - ylo, p, h) else {
             continue;
@@ -265,11 +295,11 @@ pub fn cut(stock: &Stock, heights: &mut Grid<f32>, prog: &Program, tool: Tool) -
             let ja = band * BAND;
             let jb = ja + rows.len() / w;
             for &k in bin {
-                let seg = &prog.segments[k as usize];
+                let seg = &segs[k as usize];
                 let sw = Sweep::new(seg.a, seg.b, tool);
                 let rapid = seg.kind == Kind::Rapid;
                 if !rapid && matches!(tool, Tool::Ball { .. }) {
-                    let continues = k > 0 && prog.segments[k as usize - 1].b == seg.a;
+                    let continues = k > 0 && segs[k as usize - 1].b == seg.a;
                     ball_rows(stock, rows, ja, w, &sw, continues, floor);
                     continue;
                 }
@@ -502,7 +532,7 @@ mod tests {
         for spec in ["ball:2", "flat:1.5", "vbit:60:3", "taperball:0.3:10:2.5"] {
             let tool = Tool::parse(spec).unwrap();
             let (s, mut g) = stock(5.0, 0.1);
-            cut(&s, &mut g, &prog, tool);
+            cut(&s, &mut g, &prog.segments, tool);
             let b = brute(&s, &prog, tool);
             // compare away from the rim of the footprint, where a flat or
             // V tool's edge makes the surface jump
@@ -567,7 +597,7 @@ mod tests {
             }
             let prog = program(&job).unwrap();
             let (s, mut g) = stock(6.0, 0.05);
-            cut(&s, &mut g, &prog, tool);
+            cut(&s, &mut g, &prog.segments, tool);
             let (w, h) = s.cells();
             let sweeps: Vec<Sweep> = prog
                 .segments

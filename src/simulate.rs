@@ -107,13 +107,6 @@ impl SimulateJob {
         let prog = t
             .time("parse", || gcode::program(&text))
             .map_err(|e| crate::Error(format!("{what}: {e}")))?;
-        let spec = match (&self.tool, &prog.tool) {
-            (Some(s), _) | (None, Some(s)) => s.clone(),
-            (None, None) => {
-                bail!("{what}: no tool given: use --tool or a (tool: SPEC) comment in the job")
-            }
-        };
-        let tool = Tool::parse(&spec)?;
         let relief: Relief = t.time("load relief", || {
             file::load(&self.relief, self.relief_width, self.relief_depth)
         })?;
@@ -138,7 +131,10 @@ impl SimulateJob {
             bail!("--stock/--oversample: {w} x {h} cells is too many");
         }
         let mut cut = Grid::new(w, h, 0.0f32);
-        let rapids = t.time("cut", || sim::cut(&stock, &mut cut, &prog, tool));
+        let tool = self.tool.as_deref().map(Tool::parse).transpose()?;
+        let (rapids, tool) = t
+            .time("cut", || sim::cut_program(&stock, &mut cut, &prog, tool))
+            .map_err(|e| crate::Error(format!("{what}: {e}")))?;
         let (gouge, residual, mean, dev) =
             t.time("compare", || sim::deviation(&stock, &cut, &relief));
         let report = Report {

@@ -72,10 +72,7 @@ impl Emitter {
             comment(&mut e.out, h);
         }
         e.line("G21 G90 G17 G94".into());
-        e.line(format!("M3 S{}", num(s.rpm.round())));
-        if s.dwell > 0.0 {
-            e.line(format!("G4 P{}", num(s.dwell)));
-        }
+        e.spindle(s);
         e
     }
 
@@ -114,35 +111,69 @@ impl Emitter {
         self.line(l);
     }
 
-    /// Cut one continuous pass: travel at safe Z, plunge, cut, retract.
-    pub fn pass(&mut self, pts: &[DVec3], s: &Settings) {
+    /// Cut one continuous pass: rise to `clear_z` (a height known to
+    /// clear the material) if lower, travel there, plunge, cut.
+    pub fn pass(&mut self, pts: &[DVec3], s: &Settings, clear_z: f64) {
         let Some(&first) = pts.first() else { return };
-        let at_safe = self.pos.is_some_and(|p| (p.z - s.safe_z).abs() < 1e-9);
-        if !at_safe {
-            let p = self
-                .pos
-                .map(|p| DVec3::new(p.x, p.y, s.safe_z))
-                .unwrap_or(DVec3::new(0.0, 0.0, s.safe_z));
-            if self.pos.is_none() {
-                self.line(format!("G0 Z{}", num(s.safe_z)));
+        let z = match self.pos {
+            None => {
+                let z = clear_z.max(s.safe_z);
+                self.line(format!("G0 Z{}", num(z)));
                 self.motion = Some(0);
-                self.pos = Some(p);
-            } else {
-                self.go(p, true, 0.0);
+                self.pos = Some(DVec3::new(f64::NAN, f64::NAN, z));
+                z
             }
+            Some(p) if p.z < clear_z => {
+                self.go(DVec3::new(p.x, p.y, clear_z), true, 0.0);
+                clear_z
+            }
+            Some(p) => p.z,
+        };
+        self.go(DVec3::new(first.x, first.y, z), true, 0.0);
+        if z > clear_z && clear_z > first.z {
+            self.go(DVec3::new(first.x, first.y, clear_z), true, 0.0);
         }
-        self.go(DVec3::new(first.x, first.y, s.safe_z), true, 0.0);
         self.go(first, false, s.plunge_feed);
         for &p in &pts[1..] {
             self.go(p, false, s.feed);
         }
+    }
+
+    /// Up to safe Z.
+    pub fn retract(&mut self, s: &Settings) {
         if let Some(p) = self.pos {
-            self.go(DVec3::new(p.x, p.y, s.safe_z), true, 0.0);
+            if p.z < s.safe_z {
+                self.go(DVec3::new(p.x, p.y, s.safe_z), true, 0.0);
+            }
         }
     }
 
-    /// Spindle off, end of program.
-    pub fn finish(mut self) -> String {
+    /// Retract, stop the spindle and pause (M0) for the operator to fit
+    /// the next tool; `header` (with its `tool: SPEC` line) says which.
+    pub fn tool_change(&mut self, header: &[String], s: &Settings) {
+        self.retract(s);
+        self.line("M5".into());
+        for h in header {
+            comment(&mut self.out, h);
+        }
+        comment(
+            &mut self.out,
+            "change the tool, set Z0 on the stock top again, then resume",
+        );
+        self.line("M0".into());
+        self.spindle(s);
+    }
+
+    fn spindle(&mut self, s: &Settings) {
+        self.line(format!("M3 S{}", num(s.rpm.round())));
+        if s.dwell > 0.0 {
+            self.line(format!("G4 P{}", num(s.dwell)));
+        }
+    }
+
+    /// Retract, spindle off, end of program.
+    pub fn finish(mut self, s: &Settings) -> String {
+        self.retract(s);
         self.line("M5".into());
         self.line("M30".into());
         self.out
@@ -170,8 +201,9 @@ mod tests {
                 DVec3::new(2.0, 2.0, -0.25),
             ],
             &s,
+            s.safe_z,
         );
-        let g = e.finish();
+        let g = e.finish(&s);
         assert!(g.lines().all(|l| l.len() <= MAX_LINE));
         assert!(g.contains("G1 Z-0.5 F300\nX1.5 Z-0.25 F1200\nX2\n"), "{g}");
         assert_eq!(num(-0.00001), "0");

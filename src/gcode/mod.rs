@@ -37,8 +37,11 @@ pub struct Program {
     pub dwell_s: f64,
     /// Lines in the file.
     pub lines: usize,
-    /// Tool spec from a `(tool: SPEC ...)` header comment, if any.
+    /// Tool spec from the first `(tool: SPEC ...)` comment, if any.
     pub tool: Option<String>,
+    /// Every `(tool: SPEC ...)` comment: the index of the first segment it
+    /// cuts and its spec (a tool change starts a new one).
+    pub tools: Vec<(usize, String)>,
 }
 
 /// Largest chord error when arcs are broken into straight moves (mm).
@@ -61,14 +64,15 @@ pub fn program(text: &str) -> Result<Program> {
     let (mut motion, mut absolute, mut scale, mut feed) = (0u8, true, 1.0f64, None::<f64>);
     let mut stop = true;
     for l in &lines {
-        if p.tool.is_none() {
-            for c in &l.comments {
-                let lower = c.to_ascii_lowercase();
-                if let Some(rest) = lower
-                    .strip_prefix("tool:")
-                    .or_else(|| lower.strip_prefix("tool "))
-                {
-                    p.tool = rest.split_whitespace().next().map(str::to_string);
+        for c in &l.comments {
+            let lower = c.to_ascii_lowercase();
+            if let Some(rest) = lower
+                .strip_prefix("tool:")
+                .or_else(|| lower.strip_prefix("tool "))
+            {
+                if let Some(spec) = rest.split_whitespace().next() {
+                    p.tool.get_or_insert_with(|| spec.to_string());
+                    p.tools.push((p.segments.len(), spec.to_string()));
                 }
             }
         }

@@ -1,7 +1,17 @@
 //! Stage 3: toolpaths on a relief: the exact drop-cutter (cutter-location
-//! surface) for every tool shape, raster finishing, pass refinement and
-//! merging.
+//! surface) for every tool shape, raster and waterline finishing,
+//! roughing, pass refinement and merging.
 
 pub mod dropcutter;
 pub mod path;
 pub mod raster;
+pub mod rough;
+pub mod waterline;
+
+/// One cutting pass and the height to travel to its start at.
+#[derive(Clone, Debug)]
+pub struct Pass {
+    pub pts: Vec<glam::DVec3>,
+    /// Z for the travel to the pass's start, mm: clears the material.
+    pub clear_z: f64,
+}

@@ -90,6 +90,27 @@ pub fn zigzag(hf: &HeightField, tool: &Tool, rows: &[Vec<(f64, f64)>], floor: f6
     out
 }
 
+/// One-way rows, each its own pass. Rows follow one another toward the
+/// left of their direction, so the uncut side is on the left: climb
+/// (material on the right of a clockwise spindle) runs them backwards.
+pub fn one_way(
+    hf: &HeightField,
+    tool: &Tool,
+    rows: &[Vec<(f64, f64)>],
+    floor: f64,
+    climb: bool,
+) -> Vec<Vec<DVec3>> {
+    rows.par_iter()
+        .map(|row| {
+            let mut r = row.clone();
+            if climb {
+                r.reverse();
+            }
+            drop_along(hf, tool, &r, floor)
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -1,0 +1,207 @@
+//! Roughing: Z layers a step-down apart, each cleared by raster rows, the
+//! tool kept `stock_to_leave` off the relief by dropping a tool enlarged
+//! by that much (exact for a ball; for a flat end mill the enlarged
+//! cylinder contains the offset tool, so it never comes closer).
+//!
+//! A row is cut at a layer only where material remains, that is where the
+//! offset CL surface lies below the previous layer; it follows that surface
+//! where it rises above the layer, so a run ends where the stock was
+//! already cleared to the relief, and short gaps between runs are crossed
+//! on the surface instead of by a retract.
+
+use super::dropcutter::HeightField;
+use super::path::snap;
+use super::Pass;
+use crate::bail;
+use crate::error::Result;
+use crate::tool::Tool;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// Height above the (known upper bound of) material for travels, mm.
+const CLEARANCE: f64 = 1.0;
+/// Ramp entry angle into the material.
+const RAMP_DEG: f64 = 5.0;
+
+pub struct Params {
+    pub tool: Tool,
+    pub stepover: f64,
+    pub step_down: f64,
+    pub stock_to_leave: f64,
+    pub angle: f64,
+}
+
+/// The roughing passes for a `w` x `h` panel whose background is `floor`.
+pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Result<Vec<Pass>> {
+    let stl = p.stock_to_leave;
+    let big = match p.tool {
+        Tool::Flat { d } => Tool::Flat { d: d + 2.0 * stl },
+        Tool::Ball { d } => Tool::Ball { d: d + 2.0 * stl },
+        t => bail!(
+            "--rough {}: roughing takes a flat or ball end mill",
+            t.spec()
+        ),
+    };
+    let bottom = floor + stl;
+    if bottom >= 0.0 {
+        bail!(
+            "--stock-to-leave {stl}: leaves nothing to rough in a relief {:.3} mm deep",
+            -floor
+        );
+    }
+    let n = (-bottom / p.step_down - 1e-9).ceil().max(1.0) as usize;
+    let layer = |k: isize| {
+        if k < 0 {
+            0.0
+        } else {
+            -(k + 1) as f64 * -bottom / n as f64
+        }
+    };
+    // the offset CL surface along every row, once for all layers
+    let rows = super::raster::rows(w, h, p.angle, p.stepover, hf.pitch);
+    let cl: Vec<Vec<DVec3>> = rows
+        .par_iter()
+        .map(|row| {
+            let mut stack = Vec::new();
+            let mut hint = None;
+            row.iter()
+                .map(|&(x, y)| {
+                    let (x, y) = (snap(x), snap(y));
+                    let z = match hf.drop_from(&big, x, y, hint, &mut stack) {
+                        Some((z, c)) => {
+                            hint = Some(c);
+                            (z + stl).max(bottom)
+                        }
+                        None => bottom,
+                    };
+                    DVec3::new(x, y, z)
+                })
+                .collect()
+        })
+        .collect();
+    let gap_max = (4.0 * p.tool.radius() / hf.pitch).ceil() as usize;
+    let mut out = Vec::new();
+    for k in 0..n as isize {
+        let (z, above) = (layer(k), layer(k - 1));
+        let mut prev_end: Option<DVec3> = None;
+        for (r, row) in cl.iter().enumerate() {
+            // material remains where the surface is below the last layer
+            let active: Vec<bool> = row.iter().map(|q| q.z < above - 1e-4).collect();
+            let mut runs: Vec<(usize, usize)> = Vec::new();
+            let mut i = 0;
+            while i < row.len() {
+                if !active[i] {
+                    i += 1;
+                    continue;
+                }
+                let s = i;
+                while i < row.len() && active[i] {
+                    i += 1;
+                }
+                let (a, b) = (s.saturating_sub(1), i.min(row.len() - 1));
+                match runs.last_mut() {
+                    Some(last) if a <= last.1 + gap_max => last.1 = b,
+                    _ => runs.push((a, b)),
+                }
+            }
+            if r % 2 == 1 {
+                runs.reverse();
+            }
+            for (a, b) in runs {
+                let mut pts: Vec<DVec3> = row[a..=b]
+                    .iter()
+                    .map(|q| DVec3::new(q.x, q.y, q.z.max(z)))
+                    .collect();
+                if r % 2 == 1 {
+                    pts.reverse();
+                }
+                let top = above.max(pts[0].z);
+                let clear = match prev_end {
+                    Some(e) => travel_height(hf, &big, stl, e, pts[0], above),
+                    None => 0.0,
+                } + CLEARANCE;
+                prev_end = pts.last().copied();
+                let pts = ramp(&pts, top, p.tool.radius());
+                out.push(Pass {
+                    pts,
+                    clear_z: clear,
+                });
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Upper bound of the material between two points of a layer: the last
+/// layer, or the offset CL surface where that rises higher (the layers
+/// above cut down to it).
+fn travel_height(hf: &HeightField, big: &Tool, stl: f64, a: DVec3, b: DVec3, above: f64) -> f64 {
+    let n = ((b - a).truncate().length() / hf.pitch).ceil() as usize + 1;
+    (0..=n)
+        .map(|i| {
+            let q = a + (b - a) * (i as f64 / n as f64);
+            hf.drop(big, q.x, q.y)
+                .map_or(above, |z| (z + stl).max(above))
+        })
+        .fold(above.max(a.z).max(b.z), f64::max)
+}
+
+/// Enter the pass at `top` (the material's top there) by ramping back and
+/// forth along its first stretch at RAMP_DEG instead of plunging, never
+/// below the pass itself. Short passes plunge.
+fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
+    let depth = top - pts[0].z;
+    let mut len = 0.0;
+    let mut m = 0;
+    while m + 1 < pts.len() && len < 4.0 * r {
+        len += (pts[m + 1] - pts[m]).truncate().length();
+        m += 1;
+    }
+    if depth <= 1e-3 || len < r {
+        return pts.to_vec();
+    }
+    let per_leg = len * RAMP_DEG.to_radians().tan();
+    let legs = ((depth / per_leg).ceil() as usize).max(1);
+    let legs = legs + legs % 2; // end back at the start
+    let slope = depth / (legs as f64 * len);
+    let mut out = vec![DVec3::new(pts[0].x, pts[0].y, top)];
+    let mut dist = 0.0;
+    for leg in 0..legs {
+        let idx: Vec<usize> = if leg % 2 == 0 {
+            (1..=m).collect()
+        } else {
+            (0..m).rev().collect()
+        };
+        for i in idx {
+            let prev = *out.last().unwrap();
+            dist += (pts[i] - prev).truncate().length();
+            let z = (top - dist * slope).max(pts[i].z);
+            out.push(DVec3::new(pts[i].x, pts[i].y, z));
+        }
+    }
+    out.pop(); // the start again, at its own depth:
+    out.extend_from_slice(pts);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ramp_descends_gently_and_ends_at_the_start() {
+        let pts: Vec<DVec3> = (0..50)
+            .map(|i| DVec3::new(i as f64 * 0.2, 0.0, -2.0))
+            .collect();
+        let r = ramp(&pts, 0.0, 1.5);
+        assert_eq!(r[0], DVec3::new(0.0, 0.0, 0.0));
+        let k = r.len() - pts.len();
+        assert_eq!(&r[k..], &pts[..]);
+        for w in r.windows(2) {
+            let dz = w[0].z - w[1].z;
+            let dxy = (w[1] - w[0]).truncate().length();
+            assert!(dz <= dxy * RAMP_DEG.to_radians().tan() + 1e-9, "{w:?}");
+        }
+        assert!(r[..k].iter().all(|q| q.z >= -2.0));
+    }
+}

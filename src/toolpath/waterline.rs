@@ -1,0 +1,484 @@
+//! Waterline finishing: closed contours of the CL surface at Z levels. On a
+//! steep wall a raster row crosses the wall in one long move and leaves a
+//! wide scallop; a waterline runs along it, so the wall is cut at the Z
+//! step instead of the row spacing.
+//!
+//! The CL surface is dropped on a node grid one sample pitch apart that
+//! reaches a tool radius past the panel, where nothing is in reach and the
+//! CL surface is the floor: every contour above the floor is closed. The
+//! contours are traced by marching squares and each crossing is then found
+//! on the exact CL surface by bisection along its grid edge.
+
+use super::dropcutter::HeightField;
+use crate::grid::Grid;
+use crate::tool::Tool;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// How closely a contour point is placed on its level (mm, on the low side).
+const LEVEL_TOL: f64 = 1e-4;
+
+/// The CL surface on a node grid: node (i, j) at (x0 + i p, y0 + j p).
+pub struct ClGrid {
+    pub z: Grid<f64>,
+    pub x0: f64,
+    pub y0: f64,
+    pub p: f64,
+    pub floor: f64,
+}
+
+impl ClGrid {
+    /// Drop `tool` on nodes covering [0,w] x [0,h] plus a tool radius and a
+    /// node on every side; nodes with no sample in reach take `floor`.
+    pub fn new(hf: &HeightField, tool: &Tool, w: f64, h: f64, floor: f64) -> ClGrid {
+        let p = hf.pitch;
+        let m = (tool.radius() / p).ceil() + 2.0;
+        let (x0, y0) = (p / 2.0 - m * p, p / 2.0 - m * p);
+        let nx = ((w + 2.0 * m * p) / p).round() as usize;
+        let ny = ((h + 2.0 * m * p) / p).round() as usize;
+        let rows: Vec<Vec<f64>> = (0..ny)
+            .into_par_iter()
+            .map(|j| {
+                let mut stack = Vec::new();
+                let mut hint = None;
+                (0..nx)
+                    .map(|i| {
+                        let (x, y) = (x0 + i as f64 * p, y0 + j as f64 * p);
+                        match hf.drop_from(tool, x, y, hint, &mut stack) {
+                            Some((z, c)) => {
+                                hint = Some(c);
+                                z.max(floor)
+                            }
+                            None => floor,
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        ClGrid {
+            z: Grid::from_vec(nx, ny, rows.concat()),
+            x0,
+            y0,
+            p,
+            floor,
+        }
+    }
+
+    fn at(&self, i: usize, j: usize) -> f64 {
+        self.z.data[j * self.z.w + i]
+    }
+
+    fn pos(&self, i: usize, j: usize) -> (f64, f64) {
+        (self.x0 + i as f64 * self.p, self.y0 + j as f64 * self.p)
+    }
+
+    /// Steepness of the CL surface at a node (central differences).
+    fn slope(&self, i: usize, j: usize) -> f64 {
+        let (w, h) = (self.z.w, self.z.h);
+        let d = |a: f64, b: f64, n: usize| (b - a) / (n as f64 * self.p);
+        let (il, ir) = (i.saturating_sub(1), (i + 1).min(w - 1));
+        let (jl, jr) = (j.saturating_sub(1), (j + 1).min(h - 1));
+        let gx = d(self.at(il, j), self.at(ir, j), ir - il);
+        let gy = d(self.at(i, jl), self.at(i, jr), jr - jl);
+        gx.hypot(gy)
+    }
+}
+
+/// A grid edge: from node (i, j) one step in +x (`vertical` false) or +y.
+#[derive(Clone, Copy, Hash, PartialEq, Eq, Debug)]
+struct Edge {
+    i: usize,
+    j: usize,
+    vertical: bool,
+}
+
+impl Edge {
+    fn nodes(self) -> ((usize, usize), (usize, usize)) {
+        let b = if self.vertical {
+            (self.i, self.j + 1)
+        } else {
+            (self.i + 1, self.j)
+        };
+        ((self.i, self.j), b)
+    }
+}
+
+/// One contour: points at Z = level, the material (CL above the level) on
+/// the left of the direction of travel; `closed` loops end where they
+/// start. `slope` is the CL surface's steepness at each point.
+#[derive(Clone, Debug)]
+pub struct Contour {
+    pub pts: Vec<DVec3>,
+    pub slope: Vec<f64>,
+    pub closed: bool,
+}
+
+/// Steeper than 45 degrees: where waterlines beat raster rows.
+pub const STEEP: f64 = 1.0;
+
+/// The closed contours of the CL surface at `level`, each point on the
+/// exact CL surface within LEVEL_TOL below the level.
+pub fn contours(g: &ClGrid, hf: &HeightField, tool: &Tool, level: f64) -> Vec<Contour> {
+    let (w, h) = (g.z.w, g.z.h);
+    let above = |i: usize, j: usize| g.at(i, j) >= level;
+    // segments from a crossing edge to the next, cell by cell: walking a
+    // cell's edges counter-clockwise, a segment runs from an edge that goes
+    // above -> below to one that goes below -> above, which keeps the
+    // material on its left
+    let cells: Vec<Vec<(Edge, Edge)>> = (0..h - 1)
+        .into_par_iter()
+        .map(|j| {
+            let mut segs = Vec::new();
+            for i in 0..w - 1 {
+                let c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
+                let up = c.map(|(a, b)| above(a, b));
+                if up.iter().all(|&u| u) || up.iter().all(|&u| !u) {
+                    continue;
+                }
+                let edges = [
+                    Edge {
+                        i,
+                        j,
+                        vertical: false,
+                    },
+                    Edge {
+                        i: i + 1,
+                        j,
+                        vertical: true,
+                    },
+                    Edge {
+                        i,
+                        j: j + 1,
+                        vertical: false,
+                    },
+                    Edge {
+                        i,
+                        j,
+                        vertical: true,
+                    },
+                ];
+                // crossing edges in counter-clockwise order, true = down
+                let cross: Vec<(Edge, bool)> = (0..4)
+                    .filter(|&k| up[k] != up[(k + 1) % 4])
+                    .map(|k| (edges[k], up[k]))
+                    .collect();
+                let centre_up = c.iter().map(|&(a, b)| g.at(a, b)).sum::<f64>() / 4.0 >= level;
+                let n = cross.len();
+                for k in 0..n {
+                    if !cross[k].1 {
+                        continue;
+                    }
+                    // saddle: the above corners join through an above centre
+                    let to = if n == 2 || centre_up {
+                        (k + 1) % n
+                    } else {
+                        (k + n - 1) % n
+                    };
+                    segs.push((cross[k].0, cross[to].0));
+                }
+            }
+            segs
+        })
+        .collect();
+    let next: HashMap<Edge, Edge> = cells.into_iter().flatten().collect();
+    // each crossing on the exact CL surface, low side
+    let mut keys: Vec<Edge> = next.keys().copied().collect();
+    keys.sort_by_key(|e| (e.j, e.i, e.vertical));
+    let points: HashMap<Edge, (DVec3, f64)> = keys
+        .par_iter()
+        .map(|&e| {
+            let ((ai, aj), (bi, bj)) = e.nodes();
+            let (pa, pb) = (g.pos(ai, aj), g.pos(bi, bj));
+            let (lo, hi) = if above(ai, aj) { (pb, pa) } else { (pa, pb) };
+            let slope = g.slope(ai, aj).max(g.slope(bi, bj));
+            (e, (crossing(hf, tool, g.floor, level, lo, hi), slope))
+        })
+        .collect();
+    let mut seen = std::collections::HashSet::new();
+    let mut out = Vec::new();
+    for &start in &keys {
+        if seen.contains(&start) {
+            continue;
+        }
+        let mut pts = Vec::new();
+        let mut slope = Vec::new();
+        let mut e = start;
+        loop {
+            seen.insert(e);
+            let (p, s) = points[&e];
+            pts.push(p);
+            slope.push(s);
+            e = next[&e];
+            if e == start {
+                break;
+            }
+        }
+        pts.push(pts[0]);
+        slope.push(slope[0]);
+        out.push(Contour {
+            pts,
+            slope,
+            closed: true,
+        });
+    }
+    out
+}
+
+/// The point between `lo` (CL below the level) and `hi` (at or above it)
+/// where the exact CL surface crosses `level`: bisection, ending on the
+/// low side so the tool at the level touches nothing there.
+fn crossing(
+    hf: &HeightField,
+    tool: &Tool,
+    floor: f64,
+    level: f64,
+    lo: (f64, f64),
+    hi: (f64, f64),
+) -> DVec3 {
+    let cl = |x: f64, y: f64| hf.drop(tool, x, y).unwrap_or(floor).max(floor);
+    let (mut a, mut b) = (lo, hi);
+    for _ in 0..40 {
+        let m = ((a.0 + b.0) / 2.0, (a.1 + b.1) / 2.0);
+        let z = cl(m.0, m.1);
+        if z >= level {
+            b = m;
+        } else {
+            a = m;
+            if level - z <= LEVEL_TOL {
+                break;
+            }
+        }
+        if (b.0 - a.0).hypot(b.1 - a.1) < 1e-6 {
+            break;
+        }
+    }
+    DVec3::new(a.0, a.1, level)
+}
+
+/// Z levels for waterlines `dz` apart, from the floor up to the top of the
+/// CL surface (the floor itself is left to the raster).
+pub fn levels(g: &ClGrid, dz: f64) -> Vec<f64> {
+    let top = g.z.data.iter().cloned().fold(g.floor, f64::max);
+    let n = ((top - g.floor) / dz).floor() as usize;
+    (1..=n)
+        .rev()
+        .map(|k| g.floor + k as f64 * dz)
+        .filter(|&l| l < top)
+        .collect()
+}
+
+/// Keep the stretches of a contour where `keep(point, slope)` holds: on
+/// the panel, and for raster+waterline on steep ground only (the raster
+/// finishes gentle slopes). A loop kept whole stays closed; a stretch
+/// reaches one point past each end.
+pub fn parts(c: &Contour, keep: impl Fn(DVec3, f64) -> bool) -> Vec<Contour> {
+    let steep = |k: usize| keep(c.pts[k], c.slope[k]);
+    let n = c.pts.len() - 1; // closed: last = first
+    let Some(start) = (0..n).find(|&k| !steep(k)) else {
+        return vec![c.clone()];
+    };
+    let mut out = Vec::new();
+    let mut run: Vec<usize> = Vec::new();
+    for s in 1..=n {
+        let k = (start + s) % n;
+        if steep(k) {
+            run.push(k);
+        } else if !run.is_empty() {
+            let mut idx = vec![(run[0] + n - 1) % n];
+            idx.append(&mut run);
+            idx.push(k);
+            if idx.len() >= 3 {
+                out.push(Contour {
+                    pts: idx.iter().map(|&i| c.pts[i]).collect(),
+                    slope: idx.iter().map(|&i| c.slope[i]).collect(),
+                    closed: false,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Thin a contour where points are collinear within `tol`. A chord may
+/// cut into the material side (the right of a point, as on a convex
+/// island) only as far as keeps the CL rise there, penetration times
+/// slope, under `tol / 2`; `clear` then lifts what is left.
+pub fn simplify(c: &Contour, tol: f64) -> Vec<DVec3> {
+    let pts = &c.pts;
+    if pts.len() < 3 {
+        return pts.to_vec();
+    }
+    let fits = |a: usize, e: usize| {
+        let d = (pts[e] - pts[a]).truncate();
+        let len = d.length();
+        if len == 0.0 {
+            return false;
+        }
+        (a + 1..e).all(|k| {
+            let v = (pts[k] - pts[a]).truncate();
+            let side = d.perp_dot(v) / len; // > 0: left of the chord
+            let t = v.dot(d) / (len * len);
+            side.abs() <= tol
+                && (side >= 0.0 || -side * c.slope[k] <= tol / 2.0)
+                && (0.0..=1.0).contains(&t)
+        })
+    };
+    let mut out = vec![pts[0]];
+    let mut start = 0;
+    let mut k = 2;
+    while k < pts.len() {
+        if !fits(start, k) {
+            out.push(pts[k - 1]);
+            start = k - 1;
+        }
+        k += 1;
+    }
+    out.push(*pts.last().unwrap());
+    out
+}
+
+/// Lift the ends of every move that would cut a sample by what it would
+/// cut (exact swept tool): a waterline stays one smooth pass, a little
+/// above its level where a chord crossed the material side.
+pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3]) -> Vec<DVec3> {
+    use super::path::{move_gouge, snap_up};
+    let g: Vec<f64> = pts
+        .par_windows(2)
+        .map(|w| move_gouge(hf, tool, w[0], w[1]).max(0.0))
+        .collect();
+    let n = g.len();
+    pts.iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let before = if k > 0 { g[k - 1] } else { 0.0 };
+            let after = if k < n { g[k] } else { 0.0 };
+            let lift = before.max(after);
+            if lift > 0.0 {
+                DVec3::new(p.x, p.y, snap_up(p.z + lift))
+            } else {
+                *p
+            }
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A dome and a steep-sided block on a floor, with a ball and a V tool:
+    /// every contour closes and every point is on the CL surface at its
+    /// level (acceptance: within 0.01 mm). On sampled data the CL surface
+    /// has vertical faces (a sample meeting the ball's equator), so the
+    /// distance is the lesser of the height below the level and the
+    /// horizontal distance to where the CL reaches the level.
+    #[test]
+    fn contours_are_closed_and_on_the_cl_surface() {
+        let (n, p) = (80, 0.25);
+        let z = Grid::from_vec(
+            n,
+            n,
+            (0..n * n)
+                .map(|k| {
+                    let (x, y) = ((k % n) as f64 * p, (k / n) as f64 * p);
+                    let dome = 25.0 - (x - 7.0).powi(2) - (y - 10.0).powi(2);
+                    let block = if (13.0..17.0).contains(&x) && (4.0..15.0).contains(&y) {
+                        -1.0
+                    } else {
+                        -3.0
+                    };
+                    (dome.max(0.0).sqrt() * 0.5 - 3.0).max(block)
+                })
+                .collect(),
+        );
+        let hf = HeightField::new(z, p);
+        for spec in ["ball:2", "vbit:90:3"] {
+            let tool = Tool::parse(spec).unwrap();
+            let g = ClGrid::new(&hf, &tool, 20.0, 20.0, -3.0);
+            let lv = levels(&g, 0.3);
+            assert!(lv.len() >= 5, "{spec}: {} levels", lv.len());
+            let mut worst = 0.0f64;
+            let mut count = 0;
+            for &l in &lv {
+                for c in contours(&g, &hf, &tool, l) {
+                    assert!(c.closed && c.pts.len() > 3);
+                    assert_eq!(c.pts.first(), c.pts.last());
+                    for q in &c.pts {
+                        let cl = |x: f64, y: f64| hf.drop(&tool, x, y).unwrap_or(-3.0).max(-3.0);
+                        let below = l - cl(q.x, q.y);
+                        assert!(q.z == l && below >= 0.0, "{spec}: above the level");
+                        let near = (0..64).any(|k| {
+                            let t = k as f64 / 64.0 * std::f64::consts::TAU;
+                            cl(q.x + 1e-3 * t.cos(), q.y + 1e-3 * t.sin()) >= l
+                        });
+                        worst = worst.max(if near { below.min(1e-3) } else { below });
+                        count += 1;
+                    }
+                }
+            }
+            assert!(count > 100, "{spec}: {count} points");
+            assert!(worst <= 1e-3, "{spec}: off by {worst}");
+        }
+    }
+
+    /// Material on the left: an island's contour runs counter-clockwise.
+    #[test]
+    fn island_contours_run_counter_clockwise() {
+        let n = 40;
+        let z = Grid::from_vec(
+            n,
+            n,
+            (0..n * n)
+                .map(|k| {
+                    let (x, y) = ((k % n) as f64 - 20.0, (k / n) as f64 - 20.0);
+                    if x * x + y * y < 64.0 {
+                        0.0
+                    } else {
+                        -2.0
+                    }
+                })
+                .collect(),
+        );
+        let hf = HeightField::new(z, 1.0);
+        let tool = Tool::parse("ball:2").unwrap();
+        let g = ClGrid::new(&hf, &tool, 40.0, 40.0, -2.0);
+        let cs = contours(&g, &hf, &tool, -1.0);
+        assert_eq!(cs.len(), 1);
+        let a: f64 = cs[0]
+            .pts
+            .windows(2)
+            .map(|w| w[0].x * w[1].y - w[1].x * w[0].y)
+            .sum();
+        assert!(a > 0.0, "signed area {a}");
+    }
+
+    /// Around a pocket (material outside) chords may stray away from the
+    /// material by the tolerance; around an island on a wall of slope 2
+    /// they may cut into it by a quarter of it.
+    #[test]
+    fn simplify_keeps_chords_off_the_material() {
+        let circle = |ccw: bool| Contour {
+            pts: (0..=400)
+                .map(|k| {
+                    let t = k as f64 / 400.0 * std::f64::consts::TAU;
+                    let t = if ccw { t } else { -t };
+                    DVec3::new(5.0 * t.cos(), 5.0 * t.sin(), 0.0)
+                })
+                .collect(),
+            slope: vec![2.0; 401],
+            closed: true,
+        };
+        // (plus the sagitta of the 400-gon itself, 1.5e-4, for the island)
+        for (ccw, lim) in [(true, 0.005 / 4.0 + 1.6e-4), (false, 0.005)] {
+            let s = simplify(&circle(ccw), 0.005);
+            assert!(s.len() * 2 < 401, "{}", s.len());
+            for w in s.windows(2) {
+                let m = (w[0] + w[1]) / 2.0;
+                // island: chords inside by at most lim; pocket: never outside
+                let r = m.truncate().length();
+                assert!(r >= 5.0 - lim - 1e-9 && r <= 5.0 + 1e-9, "{ccw}: {r}");
+            }
+        }
+    }
+}
