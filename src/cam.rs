@@ -28,8 +28,9 @@ pub enum Origin {
 pub enum Finish {
     Raster,
     Waterline,
-    /// Raster everywhere, waterlines where the CL surface is steeper than
-    /// 45 degrees.
+    /// Raster everywhere, and waterlines wherever the CL surface slopes by
+    /// more than 1 in 10, where rows crossing the slope or a crease along
+    /// them leave wide scallops.
     #[value(name = "raster+waterline")]
     RasterWaterline,
 }
@@ -312,8 +313,13 @@ impl ToolpathJob {
             raw_points += loops.iter().map(Vec::len).sum::<usize>();
             passes.extend(loops.into_iter().map(|pts| Pass { pts, clear_z: safe }));
             what.push(format!(
-                "waterline {}, Z step {step:.4} mm",
-                if climb { "climb" } else { "conventional" }
+                "waterline {}, Z step {:.4} mm",
+                if climb { "climb" } else { "conventional" },
+                if self.finish == Finish::RasterWaterline {
+                    step * waterline::GENTLEST
+                } else {
+                    step
+                }
             ));
         }
         ops.push(Op {
@@ -440,13 +446,21 @@ impl ToolpathJob {
     ) -> Vec<Vec<DVec3>> {
         let g = waterline::ClGrid::new(hf, tool, relief.width_mm, relief.height_mm, floor);
         let mut out: Vec<Vec<DVec3>> = Vec::new();
+        let steep_only = self.finish == Finish::RasterWaterline;
+        // beside a raster: waterlines on every slope of at least
+        // GENTLEST, their levels close enough to lie at most a stepover
+        // apart there
+        let dz = if steep_only {
+            dz * waterline::GENTLEST
+        } else {
+            dz
+        };
         for level in waterline::levels(&g, dz) {
             let (w, h) = (relief.width_mm, relief.height_mm);
-            let steep_only = self.finish == Finish::RasterWaterline;
             let keep = |p: DVec3, slope: f64| {
                 (0.0..=w).contains(&p.x)
                     && (0.0..=h).contains(&p.y)
-                    && (!steep_only || slope >= waterline::STEEP)
+                    && (!steep_only || slope >= waterline::GENTLEST)
             };
             let cs: Vec<waterline::Contour> = waterline::contours(&g, hf, tool, level)
                 .iter()
@@ -455,7 +469,8 @@ impl ToolpathJob {
             let mut loops: Vec<(bool, Vec<DVec3>)> = cs
                 .iter()
                 .map(|c| {
-                    let mut pts = waterline::simplify(c, self.tolerance);
+                    let c = waterline::refine(hf, tool, floor, c);
+                    let mut pts = waterline::simplify(&c, self.tolerance);
                     if climb {
                         pts.reverse();
                     }
