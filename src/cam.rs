@@ -281,17 +281,21 @@ impl ToolpathJob {
                 step,
                 relief.pitch_mm(),
             );
-            let cl = t.time("raster", || match self.direction {
-                None => vec![raster::zigzag(&hf, &tool, &rows, floor)],
-                Some(d) => raster::one_way(&hf, &tool, &rows, floor, d == Direction::Climb),
+            let tol = self.tolerance;
+            let (merged, raw) = t.time("raster", || match self.direction {
+                None => {
+                    let (p, n) = raster::zigzag(&hf, &tool, &rows, floor, false, tol);
+                    (vec![p], n)
+                }
+                Some(d) => {
+                    let climb = d == Direction::Climb;
+                    raster::one_way(&hf, &tool, &rows, floor, climb, false, tol)
+                }
             });
-            raw_points += cl.iter().map(Vec::len).sum::<usize>();
-            let merged: Vec<Vec<DVec3>> = t.time("merge", || {
-                cl.iter().map(|c| path::merge(c, self.tolerance)).collect()
-            });
+            raw_points += raw;
             t.time("check", || {
                 passes.extend(merged.iter().map(|c| Pass {
-                    pts: path::verify(&hf, &tool, c),
+                    pts: path::check_and_refine(&hf, &tool, c, floor, tol),
                     clear_z: safe,
                 }))
             });

@@ -20,7 +20,13 @@ pub struct HeightField {
     pub top: f64,
     /// levels[0] = the samples; levels[k] = max over 2^k x 2^k blocks.
     levels: Vec<Grid<f64>>,
+    /// Max over runs of ROW_BLOCK samples along each row: lets a swept
+    /// move's check skip stretches of a row lying below the tool.
+    row_max: Grid<f64>,
 }
+
+/// Samples per `row_max` block.
+pub const ROW_BLOCK: usize = 16;
 
 impl HeightField {
     pub fn new(z: Grid<f64>, pitch: f64) -> HeightField {
@@ -40,7 +46,32 @@ impl HeightField {
             }
             levels.push(n);
         }
-        HeightField { pitch, top, levels }
+        let z = &levels[0];
+        let bw = z.w.div_ceil(ROW_BLOCK);
+        let row_max = Grid::from_vec(
+            bw,
+            z.h,
+            (0..z.h)
+                .flat_map(|j| {
+                    let row = &z.data[j * z.w..(j + 1) * z.w];
+                    row.chunks(ROW_BLOCK)
+                        .map(|c| c.iter().cloned().fold(f64::NEG_INFINITY, f64::max))
+                        .collect::<Vec<_>>()
+                })
+                .collect(),
+        );
+        HeightField {
+            pitch,
+            top,
+            levels,
+            row_max,
+        }
+    }
+
+    /// Highest sample of row block `b` (samples b*ROW_BLOCK..) of row `j`.
+    #[inline]
+    pub fn row_block_max(&self, b: usize, j: usize) -> f64 {
+        self.row_max.data[j * self.row_max.w + b]
     }
 
     pub fn samples(&self) -> &Grid<f64> {

@@ -3,7 +3,7 @@
 //! whole raster is one continuous pass.
 
 use super::dropcutter::HeightField;
-use super::path::drop_along;
+use super::path::{drop_along, merge};
 use crate::tool::Tool;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -58,10 +58,18 @@ pub fn rows(w: f64, h: f64, angle: f64, stepover: f64, step: f64) -> Vec<Vec<(f6
 
 /// The zigzag raster as one continuous CL polyline: rows alternate in
 /// direction and each link from a row's end to the next row's start is
-/// dropped too. Rows are computed in parallel.
-pub fn zigzag(hf: &HeightField, tool: &Tool, rows: &[Vec<(f64, f64)>], floor: f64) -> Vec<DVec3> {
+/// dropped too. Rows are dropped and merged within `tol` in parallel.
+/// Returns the pass and the number of CL points before merging.
+pub fn zigzag(
+    hf: &HeightField,
+    tool: &Tool,
+    rows: &[Vec<(f64, f64)>],
+    floor: f64,
+    refine: bool,
+    tol: f64,
+) -> (Vec<DVec3>, usize) {
     let step = hf.pitch;
-    let passes: Vec<Vec<DVec3>> = rows
+    let passes: Vec<(Vec<DVec3>, usize)> = rows
         .par_iter()
         .enumerate()
         .map(|(k, row)| {
@@ -69,11 +77,13 @@ pub fn zigzag(hf: &HeightField, tool: &Tool, rows: &[Vec<(f64, f64)>], floor: f6
             if k % 2 == 1 {
                 r.reverse();
             }
-            drop_along(hf, tool, &r, floor)
+            let cl = drop_along(hf, tool, &r, floor, refine);
+            (merge(&cl, tol), cl.len())
         })
         .collect();
+    let raw = passes.iter().map(|p| p.1).sum();
     let mut out: Vec<DVec3> = Vec::new();
-    for pass in passes {
+    for (pass, _) in passes {
         if let (Some(&a), Some(&b)) = (out.last(), pass.first()) {
             let n = ((b - a).truncate().length() / step).ceil().max(1.0) as usize;
             let link: Vec<(f64, f64)> = (0..=n)
@@ -82,15 +92,20 @@ pub fn zigzag(hf: &HeightField, tool: &Tool, rows: &[Vec<(f64, f64)>], floor: f6
                     (a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t)
                 })
                 .collect();
-            let l = drop_along(hf, tool, &link, floor);
-            out.extend_from_slice(&l[1..l.len() - 1]);
+            // the link, merged, replaces the pass's first point (merging
+            // may lift a run's end, never lower it)
+            let l = merge(&drop_along(hf, tool, &link, floor, refine), tol);
+            out.extend_from_slice(&l[1..]);
+            out.extend_from_slice(&pass[1..]);
+            continue;
         }
         out.extend(pass);
     }
-    out
+    (out, raw)
 }
 
-/// One-way rows, each its own pass. Rows follow one another toward the
+/// One-way rows, each its own pass (merged within `tol`), and the number
+/// of CL points before merging. Rows follow one another toward the
 /// left of their direction, so the uncut side is on the left: climb
 /// (material on the right of a clockwise spindle) runs them backwards.
 pub fn one_way(
@@ -99,16 +114,22 @@ pub fn one_way(
     rows: &[Vec<(f64, f64)>],
     floor: f64,
     climb: bool,
-) -> Vec<Vec<DVec3>> {
-    rows.par_iter()
+    refine: bool,
+    tol: f64,
+) -> (Vec<Vec<DVec3>>, usize) {
+    let rows: Vec<(Vec<DVec3>, usize)> = rows
+        .par_iter()
         .map(|row| {
             let mut r = row.clone();
             if climb {
                 r.reverse();
             }
-            drop_along(hf, tool, &r, floor)
+            let cl = drop_along(hf, tool, &r, floor, refine);
+            (merge(&cl, tol), cl.len())
         })
-        .collect()
+        .collect();
+    let raw = rows.iter().map(|r| r.1).sum();
+    (rows.into_iter().map(|r| r.0).collect(), raw)
 }
 
 #[cfg(test)]
