@@ -282,19 +282,18 @@ impl ToolpathJob {
                 relief.pitch_mm(),
             );
             let tol = self.tolerance;
-            let (merged, raw) = t.time("raster", || match self.direction {
-                None => {
-                    let (p, n) = raster::zigzag(&hf, &tool, &rows, floor, false, tol);
-                    (vec![p], n)
-                }
-                Some(d) => {
-                    let climb = d == Direction::Climb;
-                    raster::one_way(&hf, &tool, &rows, floor, climb, false, tol)
-                }
+            let climb = self.direction == Some(Direction::Climb);
+            let (main, raw) = t.time("raster", || {
+                let cl = raster::drop_rows(&hf, &tool, &rows, floor);
+                let main = match self.direction {
+                    None => vec![raster::zigzag(&hf, &tool, &cl, floor, tol)],
+                    Some(_) => raster::one_way(&cl, climb, tol),
+                };
+                (main, cl.iter().map(Vec::len).sum::<usize>())
             });
             raw_points += raw;
             t.time("check", || {
-                passes.extend(merged.iter().map(|c| Pass {
+                passes.extend(main.iter().map(|c| Pass {
                     pts: path::check_and_refine(&hf, &tool, c, floor, tol),
                     clear_z: safe,
                 }))

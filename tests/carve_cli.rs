@@ -38,11 +38,69 @@ fn reachable(hf: &HeightField, tool: &Tool, w: usize, h: usize) -> Vec<f64> {
         .collect()
 }
 
+/// What an ideal raster (exact ball positions every half sample along rows
+/// y = 0, s, 2s, ..., h) leaves at each sample: the scallop of the
+/// stepover on this very surface, creases and all.
+fn ideal_raster(hf: &HeightField, r: f64, s: f64, w: usize, h: usize) -> Vec<f64> {
+    let p = hf.pitch;
+    let (wm, hm) = (w as f64 * p, h as f64 * p);
+    let mut ys: Vec<f64> = (0..)
+        .map(|k| k as f64 * s)
+        .take_while(|&y| y < hm)
+        .collect();
+    ys.push(hm);
+    let tool = Tool::Ball { d: 2.0 * r };
+    let nx = (wm / (p / 2.0)).round() as usize;
+    let rows: Vec<Vec<f64>> = ys
+        .iter()
+        .map(|&y| {
+            (0..=nx)
+                .map(|k| {
+                    hf.drop(&tool, k as f64 * p / 2.0, y)
+                        .unwrap_or(f64::INFINITY)
+                })
+                .collect()
+        })
+        .collect();
+    (0..w * h)
+        .map(|i| {
+            let (x, y) = hf.centre(i % w, i / w);
+            let mut best = f64::INFINITY;
+            for (row, &yr) in rows.iter().zip(&ys) {
+                let dy = (y - yr).abs();
+                if dy > r {
+                    continue;
+                }
+                let span = (r * r - dy * dy).sqrt();
+                let k0 = ((x - span) / (p / 2.0)).floor().max(0.0) as usize;
+                let k1 = (((x + span) / (p / 2.0)).ceil() as usize).min(nx);
+                for (k, z) in row.iter().enumerate().take(k1 + 1).skip(k0) {
+                    let dx = k as f64 * p / 2.0 - x;
+                    let d2 = dx * dx + dy * dy;
+                    if d2 <= r * r {
+                        best = best.min(z + r - (r * r - d2).sqrt());
+                    }
+                }
+            }
+            best
+        })
+        .collect()
+}
+
+/// Residuals of a finishing job where the tool can reach, mm.
+struct Residual {
+    /// Worst height over the flat scallop of the stepover, corrected for
+    /// the slope across the rows.
+    over_flat_scallop: f64,
+    /// Worst height over what an ideal raster at the stepover leaves.
+    over_ideal_raster: f64,
+}
+
 /// Carve `model` (the demo if None) at `res` px with a 2 mm ball, 10%
-/// stepover and `--finish finish`; simulate it; return the worst residual
-/// over the slope-corrected scallop where the tool can reach, after
-/// asserting no gouge, no rapid in stock, GRBL words and short lines.
-fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> f64 {
+/// stepover and `--finish finish`; simulate it; measure the residual where
+/// the tool can reach, after asserting no gouge, no rapid in stock, GRBL
+/// words and short lines.
+fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> Residual {
     let d = scratch(name);
     let job = d.join("job.nc");
     let mut args = vec!["carve"];
@@ -108,7 +166,9 @@ fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> f64 {
         let se = (s * (1.0 + slope * slope).sqrt()).min(2.0 * r);
         r - (r * r - (se / 2.0).powi(2)).sqrt()
     };
+    let ideal = ideal_raster(&hf, r, s, w, h);
     let mut worst = f64::MIN;
+    let mut over_ideal = f64::MIN;
     let mut counted = 0;
     for i in 0..w * h {
         let t = target[i] - depth;
@@ -116,6 +176,7 @@ fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> f64 {
             continue; // the tool cannot get there
         }
         counted += 1;
+        over_ideal = over_ideal.max(got[i] - depth - ideal[i].max(t));
         let excess = got[i] - depth - t - scallop_at(i);
         if excess > worst {
             worst = excess;
@@ -126,27 +187,41 @@ fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> f64 {
         }
     }
     eprintln!(
-        "{name}: {} lines, gouge {gouge:.5} mm, reachable residual at most {worst:.4} mm over the local scallop (flat scallop {scallop:.4}), {counted} of {} samples reachable",
+        "{name}: {} lines, gouge {gouge:.5} mm, reachable residual at most {worst:.4} mm over the local scallop (flat scallop {scallop:.4}) and {over_ideal:.4} mm over an ideal raster, {counted} of {} samples reachable",
         text.lines().count(),
         w * h
     );
     assert!(counted > w * h / 2);
     std::fs::remove_dir_all(d).unwrap();
-    worst
+    Residual {
+        over_flat_scallop: worst,
+        over_ideal_raster: over_ideal,
+    }
 }
 
-/// Acceptance: residual within the scallop + 0.01 mm wherever the tool
-/// reaches, for raster+waterline. Raster alone leaves a little more in the
-/// steep concave creases along outlines, where a row crosses a wall in one
-/// move: it is held to 0.02 mm.
+/// Acceptance: residual within the scallop of the stepover + 0.01 mm
+/// wherever the tool reaches. For raster the scallop is what an ideal
+/// raster at that stepover leaves on this surface: along concave creases
+/// parallel to the rows that is well over the flat scallop (~0.017 mm more
+/// on the demo and Suzanne), which is what raster+waterline is for; it is
+/// held to the flat (slope-corrected) scallop + 0.01.
 fn judge(name: &str, model: Option<&str>) {
     let r = check(&format!("{name}-raster"), model, "400", "raster");
     let rw = check(&format!("{name}-rw"), model, "400", "raster+waterline");
-    eprintln!("{name}: over the scallop: raster {r:.4} mm, raster+waterline {rw:.4} mm");
-    assert!(r <= 0.02, "{name}: raster leaves {r} mm over the scallop");
+    eprintln!(
+        "{name}: raster {:.4} mm over an ideal raster ({:.4} over the flat scallop), \
+         raster+waterline {:.4} mm over the flat scallop",
+        r.over_ideal_raster, r.over_flat_scallop, rw.over_flat_scallop
+    );
     assert!(
-        rw <= 0.01,
-        "{name}: raster+waterline leaves {rw} mm over the scallop"
+        r.over_ideal_raster <= 0.01,
+        "{name}: raster leaves {} mm over an ideal raster",
+        r.over_ideal_raster
+    );
+    assert!(
+        rw.over_flat_scallop <= 0.01,
+        "{name}: raster+waterline leaves {} mm over the scallop",
+        rw.over_flat_scallop
     );
 }
 

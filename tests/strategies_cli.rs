@@ -173,7 +173,7 @@ fn climb_and_conventional_rows_run_one_way() {
         let mut along = 0.0;
         for s in &prog.segments {
             let v = s.b - s.a;
-            if s.kind == relievo::gcode::Kind::Feed && v.y == 0.0 && v.x.abs() > 0.1 {
+            if s.kind == relievo::gcode::Kind::Feed && v.y == 0.0 && v.x.abs() > 1e-9 {
                 assert_eq!(v.x.signum(), sign, "{flag}: line {}", s.line);
                 along += v.x.abs();
             }

@@ -111,7 +111,7 @@ impl HeightField {
 
     /// Contribution of sample (i, j) to the tool at (x, y), if in reach.
     #[inline]
-    fn contribution(&self, tool: &Tool, i: usize, j: usize, x: f64, y: f64) -> Option<f64> {
+    pub fn contribution(&self, tool: &Tool, i: usize, j: usize, x: f64, y: f64) -> Option<f64> {
         let (sx, sy) = self.centre(i, j);
         let rho = ((sx - x) * (sx - x) + (sy - y) * (sy - y)).sqrt();
         (rho <= tool.radius()).then(|| self.levels[0].get(i, j) - tool.profile(rho))

@@ -30,82 +30,126 @@ pub fn snap_up(v: f64) -> f64 {
     (v / GRID - 1e-6).ceil() * GRID
 }
 
+/// How `drop_along` refines the gaps between dropped points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Refine {
+    /// One CL point per XY point.
+    None,
+    /// Split a gap only where the CL surface may sag more than RISE below
+    /// its chord (material left over a valley of the CL surface). Between
+    /// points touching the same sample the CL surface is that sample's
+    /// concave cap, never below the chord; between points touching two, it
+    /// is at least the higher of the two caps, so the sag has a bound that
+    /// costs no query. Dips below the chord are left to the exact check.
+    Rise,
+    /// Probe the middle and quarter points of every gap with the
+    /// drop-cutter, splitting where the chord leaves the CL surface by
+    /// more than DIP below or RISE above.
+    Full,
+}
+
 /// Drop the tool along the XY polyline `xy` (points at most about one
-/// sample apart). With `refine`, every gap whose chord leaves the CL
-/// surface by more than DIP below or RISE above at its middle or quarter
-/// points is split. Points with no sample in reach sit at `floor`.
+/// sample apart), refining gaps as `refine` says. Points with no sample in
+/// reach sit at `floor`.
 pub fn drop_along(
     hf: &HeightField,
     tool: &Tool,
     xy: &[(f64, f64)],
     floor: f64,
-    refine: bool,
+    refine: Refine,
 ) -> Vec<DVec3> {
+    type Contact = Option<(usize, usize)>;
     let mut stack = Vec::new();
     let mut hint = None;
-    let mut at = |x: f64, y: f64| -> DVec3 {
+    let mut at = |x: f64, y: f64| -> (DVec3, Contact) {
         // snap to the G-code's 0.1 um grid so the moves written are the
         // moves checked: at a flat tool's rim 0.1 um sideways can mean a
         // whole step up or down
         let (x, y) = (snap(x), snap(y));
         match hf.drop_from(tool, x, y, hint, &mut stack) {
-            Some((z, c)) => {
+            Some((z, c)) if z >= floor => {
                 hint = Some(c);
-                DVec3::new(x, y, z.max(floor))
+                (DVec3::new(x, y, z), Some(c))
             }
-            None => DVec3::new(x, y, floor),
+            Some((_, c)) => {
+                hint = Some(c);
+                (DVec3::new(x, y, floor), None)
+            }
+            None => (DVec3::new(x, y, floor), None),
         }
     };
+    // the CL surface at q is at least this (the caps of both contacts)
+    let caps = |q: DVec3, ca: Contact, cb: Contact| -> f64 {
+        [ca, cb]
+            .into_iter()
+            .flatten()
+            .filter_map(|(i, j)| hf.contribution(tool, i, j, q.x, q.y))
+            .fold(floor, f64::max)
+    };
     let mut out: Vec<DVec3> = Vec::with_capacity(xy.len());
+    let mut last: Contact = None;
     // below this the snapped midpoint would not split the gap
     let min_gap = (hf.pitch / 4096.0).max(3.0 * GRID);
     for &(x, y) in xy {
-        let p = at(x, y);
-        if !refine {
+        let (p, cp) = at(x, y);
+        let Some(&prev) = out.last() else {
             out.push(p);
-        } else if let Some(&prev) = out.last() {
-            // refine the gap prev -> p (depth-first, in order)
-            let mut todo = vec![(prev, p)];
-            while let Some((a, b)) = todo.pop() {
-                let gap = (b - a).truncate().length();
-                if gap > min_gap {
-                    // the CL surface bends at sub-sample scale (the contact
-                    // hops between samples): test the quarter points too
-                    let mut split = None;
-                    for f in [0.5, 0.25, 0.75] {
-                        let m = a + (b - a) * f;
-                        let c = at(m.x, m.y);
-                        if c.z - m.z > DIP || m.z - c.z > RISE {
-                            split = Some(if f == 0.5 {
-                                c
-                            } else {
-                                at((a.x + b.x) / 2.0, (a.y + b.y) / 2.0)
-                            });
-                            break;
-                        }
-                    }
-                    if let Some(c) = split {
-                        todo.push((c, b));
-                        todo.push((a, c));
-                        continue;
-                    }
-                } else if (b.z - a.z).abs() > DIP {
-                    // still steep at the finest gap: a jump in the CL
-                    // surface (a flat or V tool's rim meeting a sample).
-                    // Step over it on the higher side: up first, or
-                    // across first and down last; never diagonally.
-                    let corner = if b.z > a.z {
-                        DVec3::new(a.x, a.y, b.z)
-                    } else {
-                        DVec3::new(b.x, b.y, a.z)
-                    };
-                    out.push(corner);
-                }
-                out.push(b);
-            }
-        } else {
+            last = cp;
+            continue;
+        };
+        if refine == Refine::None {
             out.push(p);
+            continue;
         }
+        // refine the gap prev -> p (depth-first, in order)
+        let mut todo = vec![((prev, last), (p, cp))];
+        while let Some(((a, ca), (b, cb))) = todo.pop() {
+            let gap = (b - a).truncate().length();
+            if gap > min_gap {
+                let (mx, my) = ((a.x + b.x) / 2.0, (a.y + b.y) / 2.0);
+                let split = match refine {
+                    Refine::Rise => (ca != cb
+                        && [0.5, 0.25, 0.75].iter().any(|&f| {
+                            let m = a + (b - a) * f;
+                            m.z - caps(m, ca, cb) > RISE
+                        }))
+                    .then(|| at(mx, my)),
+                    _ => {
+                        // the CL surface bends at sub-sample scale (the
+                        // contact hops between samples): test the quarter
+                        // points too
+                        let mut split = None;
+                        for f in [0.5, 0.25, 0.75] {
+                            let m = a + (b - a) * f;
+                            let c = at(m.x, m.y);
+                            if c.0.z - m.z > DIP || m.z - c.0.z > RISE {
+                                split = Some(if f == 0.5 { c } else { at(mx, my) });
+                                break;
+                            }
+                        }
+                        split
+                    }
+                };
+                if let Some(c) = split {
+                    todo.push((c, (b, cb)));
+                    todo.push(((a, ca), c));
+                    continue;
+                }
+            } else if refine == Refine::Full && (b.z - a.z).abs() > DIP {
+                // still steep at the finest gap: a jump in the CL
+                // surface (a flat or V tool's rim meeting a sample).
+                // Step over it on the higher side: up first, or
+                // across first and down last; never diagonally.
+                let corner = if b.z > a.z {
+                    DVec3::new(a.x, a.y, b.z)
+                } else {
+                    DVec3::new(b.x, b.y, a.z)
+                };
+                out.push(corner);
+            }
+            out.push(b);
+        }
+        last = cp;
     }
     out
 }
@@ -137,9 +181,10 @@ pub fn merge(points: &[DVec3], tol: f64) -> Vec<DVec3> {
         }
         let e = DVec3::new(e.x, e.y, e.z + need);
         let d = e - a;
+        let (dd, tol2) = (d.length_squared(), tol * tol);
         let near = mid.iter().all(|&p| {
-            let t = ((p - a).dot(d) / d.length_squared()).clamp(0.0, 1.0);
-            (p - (a + d * t)).length() <= tol
+            let t = ((p - a).dot(d) / dd).clamp(0.0, 1.0);
+            (p - (a + d * t)).length_squared() <= tol2
         });
         (need <= tol && near).then_some(need)
     };
@@ -333,14 +378,33 @@ impl BallSweep {
 
     /// max(z - lowest) over the samples `row`, the first at x offset `x0`
     /// from the move's start, `p` apart, at y offset `wy`.
-    #[inline]
     fn row_gouge(&self, row: &[f64], x0: f64, p: f64, wy: f64) -> f64 {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has the features the wrapper is compiled for
+            return unsafe { self.row_gouge_avx2(row, x0, p, wy) };
+        }
+        self.row_gouge_body(row, x0, p, wy)
+    }
+
+    /// The same loop compiled for AVX2 (4 lanes of f64).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn row_gouge_avx2(&self, row: &[f64], x0: f64, p: f64, wy: f64) -> f64 {
+        self.row_gouge_body(row, x0, p, wy)
+    }
+
+    #[inline(always)]
+    fn row_gouge_body(&self, row: &[f64], x0: f64, p: f64, wy: f64) -> f64 {
         let (d, r, r2, u) = (self.d, self.r, self.r2, self.u);
         let inf = f64::INFINITY;
         // the side exists only for a move that is not vertical
         let side = self.aa > 1e-12 && self.len > 0.0;
         let inv_aa = if side { 1.0 / self.aa } else { 0.0 };
-        let mut worst = f64::NEG_INFINITY;
+        // four running maxima, so the loop vectorises without reordering a
+        // floating-point reduction
+        let mut worst = [f64::NEG_INFINITY; 4];
         for (k, &zs) in row.iter().enumerate() {
             let wx = x0 + k as f64 * p;
             let q0 = wx * wx + wy * wy;
@@ -362,9 +426,11 @@ impl BallSweep {
             } else {
                 inf
             };
-            worst = worst.max(zs - s0.min(s1).min(c));
+            let g = zs - s0.min(s1).min(c);
+            let lane = &mut worst[k % 4];
+            *lane = if g > *lane { g } else { *lane };
         }
-        worst
+        worst[0].max(worst[1]).max(worst[2].max(worst[3]))
     }
 }
 
@@ -399,7 +465,7 @@ pub fn check_and_refine(
                     (a.x + (b.x - a.x) * t, a.y + (b.y - a.y) * t)
                 })
                 .collect();
-            let cl = drop_along(hf, tool, &xy, floor, true);
+            let cl = drop_along(hf, tool, &xy, floor, Refine::Full);
             Some(verify(hf, tool, &merge(&cl, tol)))
         })
         .collect();
@@ -439,4 +505,17 @@ pub fn verify(hf: &HeightField, tool: &Tool, pts: &[DVec3]) -> Vec<DVec3> {
         out.push(w[1]);
     }
     out
+}
+
+/// The highest point of the CL surface of `tool` raised by `lift` on the
+/// straight line a -> b, and a and b themselves: a travel at or above it
+/// touches nothing the surface reaches.
+pub fn travel_height(hf: &HeightField, tool: &Tool, lift: f64, a: DVec3, b: DVec3) -> f64 {
+    let n = ((b - a).truncate().length() / hf.pitch).ceil() as usize + 1;
+    (0..=n)
+        .map(|i| {
+            let q = a + (b - a) * (i as f64 / n as f64);
+            hf.drop(tool, q.x, q.y).map_or(f64::MIN, |z| z + lift)
+        })
+        .fold(a.z.max(b.z), f64::max)
 }

@@ -117,7 +117,7 @@ pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Resul
                 }
                 let top = above.max(pts[0].z);
                 let clear = match prev_end {
-                    Some(e) => travel_height(hf, &big, stl, e, pts[0], above),
+                    Some(e) => super::path::travel_height(hf, &big, stl, e, pts[0]).max(above),
                     None => 0.0,
                 } + CLEARANCE;
                 prev_end = pts.last().copied();
@@ -130,20 +130,6 @@ pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Resul
         }
     }
     Ok(out)
-}
-
-/// Upper bound of the material between two points of a layer: the last
-/// layer, or the offset CL surface where that rises higher (the layers
-/// above cut down to it).
-fn travel_height(hf: &HeightField, big: &Tool, stl: f64, a: DVec3, b: DVec3, above: f64) -> f64 {
-    let n = ((b - a).truncate().length() / hf.pitch).ceil() as usize + 1;
-    (0..=n)
-        .map(|i| {
-            let q = a + (b - a) * (i as f64 / n as f64);
-            hf.drop(big, q.x, q.y)
-                .map_or(above, |z| (z + stl).max(above))
-        })
-        .fold(above.max(a.z).max(b.z), f64::max)
 }
 
 /// Enter the pass at `top` (the material's top there) by ramping back and
