@@ -555,8 +555,23 @@ fn main() -> ExitCode {
         Err(e) => {
             // one line, like every other error
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments");
-            eprintln!("{} (see relievo --help)", first.trim_end());
+            let mut first = text
+                .lines()
+                .next()
+                .unwrap_or("invalid arguments")
+                .trim_end()
+                .to_string();
+            // clap lists missing arguments on the lines after the first
+            if first.ends_with(':') {
+                let missing: Vec<&str> = text
+                    .lines()
+                    .skip(1)
+                    .map(str::trim)
+                    .take_while(|l| !l.is_empty())
+                    .collect();
+                first = format!("{first} {}", missing.join(", "));
+            }
+            eprintln!("{first} (see relievo --help)");
             return ExitCode::from(2);
         }
     };

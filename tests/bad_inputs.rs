@@ -133,3 +133,56 @@ fn each_bad_input_fails_cleanly() {
     std::fs::set_permissions(&ro, perm).unwrap();
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Bad toolpath flags: one error line naming the flag, exit != 0, no job,
+/// no roughing file, no SVG left behind.
+#[test]
+fn bad_toolpath_flags_fail_cleanly() {
+    let d = scratch("bad-cam");
+    let relief = d.join("r.png");
+    demo_relief(&relief, "48");
+    let job = d.join("job.nc");
+    let svg = d.join("job.svg");
+    for (args, names) in [
+        (vec!["--rough", "vbit:60"], "--rough vbit:60"),
+        (vec!["--rough", "flat:3", "--step-down", "0"], "--step-down"),
+        (
+            vec!["--rough", "flat:3", "--stock-to-leave", "-1"],
+            "--stock-to-leave",
+        ),
+        (
+            vec!["--rough", "flat:3", "--stock-to-leave", "5"],
+            "--stock-to-leave",
+        ),
+        (vec!["--rough", "T7", "--split"], "T7"),
+        (vec!["--finish", "spiral"], "spiral"),
+        (vec!["--climb", "--conventional"], "--conventional"),
+        (vec!["--split"], "--rough"),
+        (vec!["--tool", "ball:3", "--scallop", "2"], "--scallop"),
+        (vec!["--material", "cheese"], "cheese"),
+        (vec!["--rpm", "99999"], "--rpm"),
+    ] {
+        let mut all = vec![
+            "toolpath",
+            relief.to_str().unwrap(),
+            "-o",
+            job.to_str().unwrap(),
+            "--svg",
+            svg.to_str().unwrap(),
+        ];
+        all.extend(args.iter());
+        let o = run(&all);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(names), "{args:?}: '{err}' lacks '{names}'");
+        let left: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+            .filter(|n| n.starts_with("job"))
+            .collect();
+        assert!(left.is_empty(), "{args:?} left {left:?}");
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -190,18 +190,7 @@ fn climb_and_conventional_rows_run_one_way() {
 fn tool_table_and_material_cutting_data() {
     let d = scratch("tooltable");
     let relief = d.join("r.png");
-    ok(&run(&[
-        "relief",
-        "--resolution",
-        "120",
-        "--width",
-        "60",
-        "--depth",
-        "3",
-        "-o",
-        relief.to_str().unwrap(),
-        "-q",
-    ]));
+    demo_relief(&relief, "120");
     let job = d.join("job.nc");
     let tp = |extra: &[&str]| {
         let mut a = vec![

@@ -86,3 +86,19 @@ pub fn simulate_report(job: &Path, relief: &Path, cut: &Path, extra: &[&str]) ->
     ok(&run(&args));
     serde_json::from_str(&std::fs::read_to_string(rep).unwrap()).unwrap()
 }
+
+/// The demo relief at `res` px, 60 mm wide and 3 mm deep, written to `png`.
+pub fn demo_relief(png: &Path, res: &str) {
+    ok(&run(&[
+        "relief",
+        "--resolution",
+        res,
+        "--width",
+        "60",
+        "--depth",
+        "3",
+        "-o",
+        png.to_str().unwrap(),
+        "-q",
+    ]));
+}
