@@ -17,6 +17,7 @@ pub mod timing;
 pub use error::{Error, Result};
 pub use grid::Grid;
 pub mod gcode;
+pub mod grbl;
 pub mod machine;
 pub mod sim;
 pub mod simulate;

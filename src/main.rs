@@ -33,10 +33,246 @@ enum Cmd {
     Relief(ReliefArgs),
     /// Simulate a G-code job cutting the stock and judge it against a relief.
     Simulate(SimulateArgs),
-    /// Turn a relief into a GRBL job (ball-end raster finishing).
+    /// Turn a relief into a GRBL job (roughing, raster/waterline finishing).
     Toolpath(ToolpathArgs),
     /// Relief and toolpath in one call; without MODEL, the demo scene.
     Carve(Box<CarveArgs>),
+    /// Stream a job to a GRBL controller over a serial port.
+    Send(SendArgs),
+    /// List serial ports.
+    Ports,
+    /// Ask a GRBL controller for its status, unlock it or home it.
+    Machine(MachineArgs),
+    /// Serve a simulated GRBL 1.1 machine on a pseudo-terminal (prints its path).
+    GrblSim(GrblSimArgs),
+}
+
+#[derive(Args)]
+struct SendArgs {
+    /// G-code job.
+    job: PathBuf,
+    /// Serial device, e.g. /dev/ttyUSB0.
+    #[arg(long)]
+    port: String,
+    #[arg(long, default_value_t = 115200)]
+    baud: u32,
+    /// Run the whole job in GRBL's check mode first; stop if any line fails.
+    #[arg(long)]
+    check: bool,
+    /// Send one line and wait for its reply (slower; for troublesome links).
+    #[arg(long)]
+    send_response: bool,
+    /// Start at this job line, re-entering safely.
+    #[arg(long, conflicts_with = "resume")]
+    resume_from: Option<usize>,
+    /// Resume after the last line this journal says GRBL acknowledged.
+    #[arg(long)]
+    resume: Option<PathBuf>,
+    /// Journal of acknowledged lines [default: JOB.journal].
+    #[arg(long)]
+    journal: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct MachineArgs {
+    #[arg(value_enum)]
+    action: MachineAction,
+    #[arg(long)]
+    port: String,
+    #[arg(long, default_value_t = 115200)]
+    baud: u32,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MachineAction {
+    Status,
+    Unlock,
+    Home,
+}
+
+#[derive(Args)]
+struct GrblSimArgs {
+    /// Machine profile for travel, rates and buffer size.
+    #[arg(long, default_value = "grbl-generic")]
+    machine: String,
+    /// Simulated motion runs this many times faster than real time.
+    #[arg(long, default_value_t = 1.0)]
+    speed: f64,
+    /// Append every executed line to this file.
+    #[arg(long)]
+    log: Option<PathBuf>,
+    /// Fault: reply error:CODE (default 20) to the Nth G-code line.
+    #[arg(long, value_name = "N[:CODE]")]
+    error_at: Option<String>,
+    /// Fault: raise ALARM:CODE (default 1) at the Nth G-code line.
+    #[arg(long, value_name = "N[:CODE]")]
+    alarm_at: Option<String>,
+    /// Fault: drop the link after this many bytes.
+    #[arg(long)]
+    disconnect_after: Option<usize>,
+    /// Fault: probability of noise bytes in a reply line.
+    #[arg(long, default_value_t = 0.0)]
+    garble: f64,
+}
+
+fn parse_fault(
+    s: &Option<String>,
+    default: u32,
+    what: &str,
+) -> relievo::Result<Option<(usize, u32)>> {
+    let Some(s) = s else { return Ok(None) };
+    let (n, c) = s.split_once(':').unwrap_or((s, ""));
+    let n = n
+        .parse()
+        .map_err(|_| relievo::Error(format!("{what} {s}: expected N[:CODE]")))?;
+    let c = if c.is_empty() {
+        default
+    } else {
+        c.parse()
+            .map_err(|_| relievo::Error(format!("{what} {s}: expected N[:CODE]")))?
+    };
+    Ok(Some((n, c)))
+}
+
+/// Ctrl-C: set by the signal handler, read by the sender.
+static CANCEL: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+extern "C" fn on_sigint(_: libc::c_int) {
+    CANCEL.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+fn send(args: SendArgs, quiet: bool) -> relievo::Result<()> {
+    use relievo::grbl::{job::SendJob, port::SerialLink};
+    let job = SendJob {
+        job: args.job,
+        check: args.check,
+        send_response: args.send_response,
+        resume_from: args.resume_from,
+        resume: args.resume,
+        journal: args.journal,
+        progress: !quiet,
+        rx_buffer: 128,
+    };
+    // read the job before touching the machine
+    relievo::grbl::sender::load_job(&job.job)?;
+    let mut port = SerialLink::open(&args.port, args.baud)?;
+    // SAFETY: the handler only stores to an atomic
+    unsafe {
+        libc::signal(
+            libc::SIGINT,
+            on_sigint as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
+    }
+    let (o, n) = job.run(&mut port, &CANCEL)?;
+    if !quiet {
+        eprintln!(
+            "{}: {n} lines sent and acknowledged in {:.1} s ({} bytes, {:.0} bytes/s)",
+            job.job.display(),
+            o.seconds,
+            o.bytes,
+            o.bytes as f64 / o.seconds.max(1e-9)
+        );
+    }
+    Ok(())
+}
+
+fn machine_cmd(args: MachineArgs) -> relievo::Result<()> {
+    use relievo::grbl::{port::SerialLink, sender::Replies};
+    let mut port = SerialLink::open(&args.port, args.baud)?;
+    let mut r = Replies::new(&mut port);
+    r.handshake(2.5)?;
+    let lines = match args.action {
+        MachineAction::Status => {
+            r.port.write_all(b"?")?;
+            let mut got = Vec::new();
+            while let Some(l) = r.next(1.0)? {
+                let status = l.starts_with('<');
+                got.push(l);
+                if status {
+                    break;
+                }
+            }
+            got
+        }
+        MachineAction::Unlock => r.command("$X", 5.0)?,
+        MachineAction::Home => r.command("$H", 120.0)?,
+    };
+    for l in &lines {
+        println!("{l}");
+    }
+    if let Some(e) = lines.iter().find(|l| l.starts_with("error:")) {
+        let code: u32 = e[6..].parse().unwrap_or(0);
+        relievo::bail!(
+            "{}: {e} ({})",
+            args.port,
+            relievo::grbl::error_meaning(code)
+        );
+    }
+    Ok(())
+}
+
+fn grbl_sim(args: GrblSimArgs) -> relievo::Result<()> {
+    use relievo::grbl::sim::{Faults, SimGrbl};
+    use std::io::{Read, Write};
+    let m = relievo::machine::Machine::load(&args.machine)?;
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        relievo::bail!("--speed {}: must be positive", args.speed);
+    }
+    let mut sim = SimGrbl::new(&m);
+    sim.faults = Faults {
+        error_at: parse_fault(&args.error_at, 20, "--error-at")?,
+        alarm_at: parse_fault(&args.alarm_at, 1, "--alarm-at")?,
+        disconnect_after: args.disconnect_after,
+        garble: args.garble,
+    };
+    let (mut master, slave) = serialport::TTYPort::pair()
+        .map_err(|e| relievo::Error(format!("grbl-sim: no pseudo-terminal: {e}")))?;
+    let name = serialport::SerialPort::name(&slave).unwrap_or_default();
+    println!("{name}");
+    std::io::stdout().flush().ok();
+    let mut log = match &args.log {
+        Some(p) => Some(
+            std::fs::File::create(p)
+                .map_err(|e| relievo::Error(format!("{}: {e}", p.display())))?,
+        ),
+        None => None,
+    };
+    let mut logged = 0;
+    serialport::SerialPort::set_timeout(&mut master, std::time::Duration::from_millis(2))
+        .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+    let start = std::time::Instant::now();
+    let mut buf = [0u8; 1024];
+    loop {
+        let n = match master.read(&mut buf) {
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => 0,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => 0,
+            Err(e) => relievo::bail!("grbl-sim: {e}"),
+        };
+        let t = start.elapsed().as_secs_f64() * args.speed;
+        sim.advance(t);
+        for &b in &buf[..n] {
+            sim.receive(b);
+        }
+        let out = sim.take_output();
+        if !out.is_empty() && !sim.disconnected {
+            master
+                .write_all(&out)
+                .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+        }
+        if let Some(f) = log.as_mut() {
+            for l in &sim.log[logged..] {
+                writeln!(f, "{l}").map_err(|e| relievo::Error(format!("grbl-sim log: {e}")))?;
+            }
+            logged = sim.log.len();
+        }
+        if sim.overflow > 0 {
+            relievo::bail!(
+                "grbl-sim: receive buffer overflow ({} bytes lost)",
+                sim.overflow
+            );
+        }
+    }
 }
 
 #[derive(Args)]
@@ -418,6 +654,20 @@ fn spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
 
 fn run(cli: Cli) -> relievo::Result<()> {
     match cli.cmd {
+        Cmd::Send(args) => send(args, cli.quiet),
+        Cmd::Machine(args) => machine_cmd(args),
+        Cmd::GrblSim(args) => grbl_sim(args),
+        Cmd::Ports => {
+            let ports = serialport::available_ports()
+                .map_err(|e| relievo::Error(format!("listing serial ports: {e}")))?;
+            if ports.is_empty() {
+                eprintln!("no serial ports found");
+            }
+            for p in ports {
+                println!("{}", p.port_name);
+            }
+            Ok(())
+        }
         Cmd::Simulate(args) => simulate(args, cli.quiet, cli.verbose),
         Cmd::Toolpath(args) => {
             let relief = relievo::relief::file::load(&args.relief, args.width, args.depth)?;

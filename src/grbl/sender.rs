@@ -1,0 +1,577 @@
+//! Streaming a job to GRBL (DESIGN.md section 8): the welcome handshake,
+//! an optional check-mode pass, character-counting streaming (send and
+//! wait as the fallback), status polling, stopping on the first error or
+//! alarm with the job line and GRBL's meaning, a journal of acknowledged
+//! lines, and a safe re-entry to resume from one.
+
+use super::port::Port;
+use super::{
+    alarm_meaning, error_meaning, CYCLE_START, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS,
+};
+use crate::bail;
+use crate::error::{Context, Result};
+use crate::gcode::parse::{parse_line, strip};
+use std::collections::VecDeque;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// One line to send: where it is in the file, and what GRBL will get.
+#[derive(Clone, Debug, PartialEq)]
+pub struct JobLine {
+    /// 1-based line in the job file.
+    pub number: usize,
+    /// Comments and spaces stripped (every byte counts against the buffer).
+    pub text: String,
+    /// The file's line as written, for messages.
+    pub original: String,
+}
+
+/// The lines of a job that carry anything for GRBL.
+pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
+    let what = path.display().to_string();
+    let text = std::fs::read_to_string(path).ctx(&what)?;
+    let mut out = Vec::new();
+    for (k, l) in text.lines().enumerate() {
+        let s = strip(l);
+        if s.is_empty() {
+            continue;
+        }
+        if s.len() > 79 {
+            bail!(
+                "{what}: line {}: {} characters after stripping; GRBL takes 79",
+                k + 1,
+                s.len()
+            );
+        }
+        out.push(JobLine {
+            number: k + 1,
+            text: s,
+            original: l.trim().to_string(),
+        });
+    }
+    if out.is_empty() {
+        bail!("{what}: no G-code in the job");
+    }
+    Ok(out)
+}
+
+#[derive(Clone, Debug)]
+pub struct Options {
+    /// Character counting (false = send one line, wait for its reply).
+    pub char_counting: bool,
+    /// GRBL's receive buffer, bytes.
+    pub rx_buffer: usize,
+    /// Status polls per second (at most 5, as GRBL advises).
+    pub poll_hz: f64,
+    /// Seconds to wait for the welcome before a soft reset.
+    pub welcome_timeout: f64,
+    /// Journal of acknowledged job lines.
+    pub journal: Option<PathBuf>,
+    /// Progress bar / log lines on stderr.
+    pub progress: bool,
+}
+
+impl Default for Options {
+    fn default() -> Options {
+        Options {
+            char_counting: true,
+            rx_buffer: 128,
+            poll_hz: 4.0,
+            welcome_timeout: 2.5,
+            journal: None,
+            progress: false,
+        }
+    }
+}
+
+/// How a stream ended short of the job's end.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Stop {
+    /// `error:N` at a job line.
+    Error {
+        line: usize,
+        text: String,
+        code: u32,
+    },
+    /// `ALARM:N`, while the oldest unacknowledged line was `line`.
+    Alarm {
+        line: Option<usize>,
+        code: u32,
+    },
+    Cancelled,
+}
+
+impl Stop {
+    pub fn describe(&self) -> String {
+        match self {
+            Stop::Error { line, text, code } => format!(
+                "GRBL refused job line {line} '{text}': error:{code} ({})",
+                error_meaning(*code)
+            ),
+            Stop::Alarm { line, code } => format!(
+                "ALARM:{code} ({}){}",
+                alarm_meaning(*code),
+                line.map_or(String::new(), |l| format!(" at job line {l}"))
+            ),
+            Stop::Cancelled => "stopped by the operator: feed hold, spindle stopped".into(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Default)]
+pub struct Outcome {
+    /// Job lines GRBL acknowledged with `ok`.
+    pub acked: usize,
+    /// Bytes of job lines written (status polls not counted).
+    pub bytes: usize,
+    pub seconds: f64,
+    /// Every error (check mode goes on after one).
+    pub errors: Vec<Stop>,
+    /// Why streaming stopped early, if it did.
+    pub stop: Option<Stop>,
+}
+
+impl Outcome {
+    /// Job bytes over what the line could carry in the time taken.
+    pub fn utilisation(&self, baud: u32) -> f64 {
+        self.bytes as f64 / (self.seconds * baud as f64 / 10.0)
+    }
+}
+
+/// Reply lines from the port; bytes GRBL never sends (non-ASCII and
+/// control bytes other than the line end) are line noise and dropped.
+pub struct Replies<'a> {
+    pub port: &'a mut dyn Port,
+    partial: Vec<u8>,
+    ready: VecDeque<String>,
+}
+
+impl<'a> Replies<'a> {
+    pub fn new(port: &'a mut dyn Port) -> Replies<'a> {
+        Replies {
+            port,
+            partial: Vec::new(),
+            ready: VecDeque::new(),
+        }
+    }
+
+    /// The next reply line, waiting up to `timeout` seconds.
+    pub fn next(&mut self, timeout: f64) -> Result<Option<String>> {
+        let until = self.port.now() + timeout;
+        loop {
+            if let Some(l) = self.ready.pop_front() {
+                return Ok(Some(l));
+            }
+            let left = until - self.port.now();
+            if left <= 0.0 {
+                return Ok(None);
+            }
+            for b in self.port.read(left)? {
+                match b {
+                    b'\n' => {
+                        let l = String::from_utf8_lossy(&self.partial).trim().to_string();
+                        self.partial.clear();
+                        if !l.is_empty() {
+                            self.ready.push_back(l);
+                        }
+                    }
+                    0x20..=0x7e => self.partial.push(b),
+                    _ => {} // \r and noise
+                }
+            }
+        }
+    }
+
+    /// Wait for the welcome; soft-reset once if it does not come.
+    pub fn handshake(&mut self, timeout: f64) -> Result<()> {
+        for attempt in 0..2 {
+            if attempt == 1 {
+                self.port.write_all(&[SOFT_RESET])?;
+            }
+            let until = self.port.now() + timeout;
+            while self.port.now() < until {
+                if let Some(l) = self.next(until - self.port.now())? {
+                    if l.starts_with("Grbl ") {
+                        // and whatever follows it at once ([MSG:..])
+                        while self.next(0.05)?.is_some() {}
+                        return Ok(());
+                    }
+                }
+            }
+        }
+        bail!("no GRBL welcome within {timeout} s, not even after a soft reset")
+    }
+
+    /// Send one command and collect its reply lines up to `ok`/`error`.
+    pub fn command(&mut self, cmd: &str, timeout: f64) -> Result<Vec<String>> {
+        self.port.write_all(format!("{cmd}\n").as_bytes())?;
+        let mut got = Vec::new();
+        let until = self.port.now() + timeout;
+        while self.port.now() < until {
+            let Some(l) = self.next(until - self.port.now())? else {
+                continue;
+            };
+            let done = l == "ok" || l.starts_with("error:");
+            got.push(l);
+            if done {
+                return Ok(got);
+            }
+        }
+        bail!("no reply to '{cmd}' within {timeout} s")
+    }
+}
+
+/// A status report: `<State|MPos:x,y,z|Bf:blocks,bytes|...>`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Status {
+    pub state: String,
+    pub pos: [f64; 3],
+    /// Free planner blocks and free receive-buffer bytes.
+    pub free: Option<(usize, usize)>,
+}
+
+/// Parse a status report line.
+pub fn parse_status(l: &str) -> Option<Status> {
+    let body = l.strip_prefix('<')?.strip_suffix('>')?;
+    let mut parts = body.split('|');
+    let state = parts.next()?.to_string();
+    let mut pos = [0.0; 3];
+    let mut bf = None;
+    for p in parts {
+        if let Some(v) = p.strip_prefix("MPos:").or_else(|| p.strip_prefix("WPos:")) {
+            for (k, x) in v.split(',').take(3).enumerate() {
+                pos[k] = x.parse().ok()?;
+            }
+        } else if let Some(v) = p.strip_prefix("Bf:") {
+            let (a, b) = v.split_once(',')?;
+            bf = Some((a.parse().ok()?, b.parse().ok()?));
+        }
+    }
+    Some(Status {
+        state,
+        pos,
+        free: bf,
+    })
+}
+
+/// Stream `lines` (with `preamble` lines sent first, unjournaled).
+/// Returns when every line is acknowledged, or at the first error or
+/// alarm (in check mode errors are collected and streaming goes on).
+pub fn stream(
+    r: &mut Replies,
+    lines: &[JobLine],
+    preamble: &[String],
+    opts: &Options,
+    check_mode: bool,
+    cancel: &AtomicBool,
+) -> Result<Outcome> {
+    let start = r.port.now();
+    let mut journal = match &opts.journal {
+        Some(p) if !check_mode => Some(std::io::BufWriter::new(
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(p)
+                .ctx(p.display().to_string())?,
+        )),
+        _ => None,
+    };
+    // what to send: the preamble (index None) and the job lines
+    let items: Vec<(Option<usize>, &str)> = preamble
+        .iter()
+        .map(|p| (None, p.as_str()))
+        .chain(
+            lines
+                .iter()
+                .enumerate()
+                .map(|(k, l)| (Some(k), l.text.as_str())),
+        )
+        .collect();
+    let budget = opts.rx_buffer.saturating_sub(1).max(1);
+    let mut inflight: VecDeque<(Option<usize>, usize)> = VecDeque::new();
+    let mut used = 0;
+    let mut next = 0;
+    let mut out = Outcome::default();
+    let mut stopping = false;
+    let poll = 1.0 / opts.poll_hz.clamp(0.1, 5.0);
+    let mut last_poll = f64::MIN;
+    let mut idle_since: Option<f64> = None;
+    let mut progress = Progress::new(opts.progress, lines.len());
+    loop {
+        if cancel.load(Ordering::Relaxed) && !stopping {
+            r.port.write_all(&[FEED_HOLD])?;
+            let t = r.port.now();
+            while r.port.now() < t + 0.5 {
+                r.next(0.1)?;
+            }
+            r.port.write_all(&[SPINDLE_STOP])?;
+            out.stop = Some(Stop::Cancelled);
+            break;
+        }
+        while !stopping && next < items.len() {
+            let len = items[next].1.len() + 1;
+            let fits = if opts.char_counting {
+                used + len <= budget || inflight.is_empty()
+            } else {
+                inflight.is_empty()
+            };
+            if !fits {
+                break;
+            }
+            r.port
+                .write_all(format!("{}\n", items[next].1).as_bytes())?;
+            out.bytes += len;
+            inflight.push_back((items[next].0, len));
+            used += len;
+            next += 1;
+        }
+        if inflight.is_empty() && (next == items.len() || stopping) {
+            break;
+        }
+        let now = r.port.now();
+        if now - last_poll >= poll {
+            r.port.write_all(&[STATUS])?;
+            last_poll = now;
+        }
+        let Some(l) = r.next(poll / 2.0)? else {
+            continue;
+        };
+        if l == "ok" || l.starts_with("error:") {
+            let Some((idx, len)) = inflight.pop_front() else {
+                continue; // a reply to nothing of ours
+            };
+            used -= len;
+            idle_since = None;
+            if let Some(code) = l.strip_prefix("error:") {
+                let code = code.trim().parse().unwrap_or(0);
+                let (line, text) = match idx {
+                    Some(k) => (lines[k].number, lines[k].original.clone()),
+                    None => (0, "(resume preamble)".into()),
+                };
+                let e = Stop::Error { line, text, code };
+                out.errors.push(e.clone());
+                if !check_mode && !stopping {
+                    // hold what is buffered, send nothing more
+                    r.port.write_all(&[FEED_HOLD])?;
+                    stopping = true;
+                    out.stop = Some(e);
+                }
+            } else if let Some(k) = idx {
+                out.acked += 1;
+                progress.set(k + 1, None);
+                if let Some(j) = journal.as_mut() {
+                    writeln!(j, "{}", lines[k].number).ctx("journal")?;
+                }
+            }
+        } else if let Some(code) = l.strip_prefix("ALARM:") {
+            let code = code.trim().parse().unwrap_or(0);
+            let line = inflight.front().and_then(|f| f.0).map(|k| lines[k].number);
+            let a = Stop::Alarm { line, code };
+            out.errors.push(a.clone());
+            out.stop = Some(a);
+            break;
+        } else if let Some(st) = parse_status(&l) {
+            progress.set(out.acked, Some(st.pos));
+            // an Idle machine with an empty buffer still owing replies
+            // has lost them (a cheap adapter dropped bytes)
+            let drained = st
+                .free
+                .is_some_and(|(p, rx)| p == super::sim::PLANNER_BLOCKS && rx >= opts.rx_buffer);
+            if st.state == "Idle" && drained && !inflight.is_empty() && !check_mode {
+                let since = *idle_since.get_or_insert(now);
+                if now - since > 2.0 {
+                    bail!(
+                        "GRBL is idle with an empty buffer but {} line(s) are unacknowledged \
+                         (replies lost on the link); stopped at job line {}",
+                        inflight.len(),
+                        inflight
+                            .front()
+                            .and_then(|f| f.0)
+                            .map_or(0, |k| lines[k].number)
+                    );
+                }
+            } else {
+                idle_since = None;
+            }
+        } else if l.starts_with("Grbl ") {
+            bail!("GRBL reset during the job (power or a soft reset); nothing more was sent");
+        }
+        if let Some(j) = journal.as_mut() {
+            j.flush().ctx("journal")?;
+        }
+    }
+    if let Some(j) = journal.as_mut() {
+        j.flush().ctx("journal")?;
+    }
+    progress.finish();
+    out.seconds = r.port.now() - start;
+    Ok(out)
+}
+
+/// Validate the whole job in check mode: `$C`, stream everything, `$C`
+/// again (GRBL resets leaving it). Returns every error.
+pub fn check(r: &mut Replies, lines: &[JobLine], opts: &Options) -> Result<Vec<Stop>> {
+    let reply = r.command("$C", 5.0)?;
+    if reply.last().is_none_or(|l| l != "ok") {
+        bail!("GRBL did not enter check mode: {}", reply.join(" "));
+    }
+    let quiet = Options {
+        progress: false,
+        journal: None,
+        ..opts.clone()
+    };
+    let o = stream(r, lines, &[], &quiet, true, &AtomicBool::new(false))?;
+    r.command("$C", 5.0)?;
+    r.handshake(opts.welcome_timeout)?;
+    Ok(o.errors)
+}
+
+/// The last job line a journal records as acknowledged.
+pub fn journal_last(path: &Path) -> Result<usize> {
+    let what = path.display().to_string();
+    let text = std::fs::read_to_string(path).ctx(&what)?;
+    let mut last = None;
+    for (k, l) in text.lines().enumerate() {
+        let l = l.trim();
+        if l.is_empty() {
+            continue;
+        }
+        last =
+            Some(l.parse::<usize>().map_err(|_| {
+                crate::Error(format!("{what}: line {}: not a job line number", k + 1))
+            })?);
+    }
+    last.ok_or_else(|| crate::Error(format!("{what}: the journal is empty")))
+}
+
+/// Lines that put the machine back where the job was before `lines[from]`:
+/// units, distance mode, spindle, up to the job's safe height, over the
+/// point, down at the plunge feed, then the job's feed.
+pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
+    let mut inches = false;
+    let mut absolute = true;
+    let mut feed: Option<f64> = None;
+    let mut spindle: Option<(u8, f64)> = None;
+    let mut s_word = 0.0;
+    let mut pos = [0.0f64; 3];
+    let mut top = 0.0f64;
+    for l in lines {
+        let Ok(p) = parse_line(&l.text, l.number) else {
+            continue;
+        };
+        if let Some(z) = p.words.iter().find(|w| w.0 == 'Z') {
+            top = top.max(z.1);
+        }
+    }
+    for l in &lines[..from] {
+        let Ok(p) = parse_line(&l.text, l.number) else {
+            continue;
+        };
+        let scale = if inches { 25.4 } else { 1.0 };
+        for &(c, v) in &p.words {
+            match (c, v as i32) {
+                ('G', 20) => inches = true,
+                ('G', 21) => inches = false,
+                ('G', 90) => absolute = true,
+                ('G', 91) => absolute = false,
+                ('M', 3) | ('M', 4) => spindle = Some((v as u8, s_word)),
+                ('M', 5) => spindle = None,
+                ('F', _) => feed = Some(v * scale),
+                ('S', _) => {
+                    s_word = v;
+                    if let Some(sp) = spindle.as_mut() {
+                        sp.1 = v;
+                    }
+                }
+                _ => {}
+            }
+        }
+        for (k, a) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+            if let Some(w) = p.words.iter().rev().find(|w| w.0 == a) {
+                let v = w.1 * scale;
+                pos[k] = if absolute { v } else { pos[k] + v };
+            }
+        }
+    }
+    let safe = top.max(pos[2]).max(5.0);
+    let n = |v: f64| crate::gcode::emit::num(v);
+    let mut out = vec!["G21G90".to_string()];
+    if let Some((m, s)) = spindle {
+        out.push(format!("M{m}S{}", n(s)));
+        out.push("G4P2".into());
+    }
+    out.push(format!("G0Z{}", n(safe)));
+    out.push(format!("G0X{}Y{}", n(pos[0]), n(pos[1])));
+    let f = feed.unwrap_or(300.0);
+    out.push(format!("G1Z{}F{}", n(pos[2]), n(f.min(300.0))));
+    out.push(format!("F{}", n(f)));
+    if inches {
+        out.push("G20".into());
+    }
+    if !absolute {
+        out.push("G91".into());
+    }
+    out
+}
+
+/// Progress on stderr: a bar on a terminal, a log line every 5 s otherwise.
+struct Progress {
+    bar: Option<indicatif::ProgressBar>,
+    log: bool,
+    total: usize,
+    last_log: std::time::Instant,
+}
+
+impl Progress {
+    fn new(on: bool, total: usize) -> Progress {
+        use std::io::IsTerminal;
+        let tty = std::io::stderr().is_terminal();
+        let bar = (on && tty).then(|| {
+            let b = indicatif::ProgressBar::new(total as u64);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{bar:30} {pos}/{len} lines {percent}% eta {eta} {msg}",
+                )
+                .unwrap(),
+            );
+            b
+        });
+        Progress {
+            bar,
+            log: on && !tty,
+            total,
+            last_log: std::time::Instant::now(),
+        }
+    }
+
+    fn set(&mut self, done: usize, pos: Option<[f64; 3]>) {
+        let msg = pos.map(|p| format!("X{:.3} Y{:.3} Z{:.3}", p[0], p[1], p[2]));
+        if let Some(b) = &self.bar {
+            b.set_position(done as u64);
+            if let Some(m) = msg {
+                b.set_message(m);
+            }
+        } else if self.log && self.last_log.elapsed().as_secs_f64() >= 5.0 {
+            self.last_log = std::time::Instant::now();
+            eprintln!(
+                "{done}/{} lines ({:.0}%){}",
+                self.total,
+                100.0 * done as f64 / self.total.max(1) as f64,
+                msg.map_or(String::new(), |m| format!(" at {m}"))
+            );
+        }
+    }
+
+    fn finish(&mut self) {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+/// Resume a paused machine (feed hold) — used after Ctrl-C by callers
+/// that choose to continue.
+pub fn resume(port: &mut dyn Port) -> Result<()> {
+    port.write_all(&[CYCLE_START])
+}

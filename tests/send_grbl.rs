@@ -1,0 +1,251 @@
+//! The sender against the simulated GRBL machine: in memory (simulated
+//! time at 115200 baud) and over a real pseudo-terminal with the real
+//! serial code (`relievo grbl-sim` in one process, `relievo send` in
+//! another).
+
+mod common;
+use common::*;
+use relievo::grbl::job::SendJob;
+use relievo::grbl::port::MemPort;
+use relievo::grbl::sender;
+use relievo::grbl::sim::{Faults, SimGrbl};
+use relievo::machine::Machine;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
+
+const BAUD: u32 = 115200;
+
+/// A job of `n` short distinct moves after a header line.
+fn write_job(dir: &Path, n: usize) -> (PathBuf, Vec<String>) {
+    let mut text = String::from("(test job)\nG21 G90 G94\nG1 X0 Y0 F6000\n");
+    let mut lines = vec!["G21G90G94".to_string(), "G1X0Y0F6000".to_string()];
+    for k in 1..=n {
+        // ~0.02 mm apart, zigzag: GRBL executes them faster than the link
+        // brings them
+        let (row, i) = (k / 1000, k % 1000);
+        let i = if row % 2 == 0 { i } else { 999 - i };
+        let (x, y) = (i as f64 * 0.02, row as f64 * 0.02);
+        let l = format!(
+            "G1X{}Y{}",
+            relievo::gcode::emit::num(x),
+            relievo::gcode::emit::num(y)
+        );
+        text.push_str(&l);
+        text.push('\n');
+        lines.push(l);
+    }
+    let p = dir.join("job.nc");
+    std::fs::write(&p, text).unwrap();
+    (p, lines)
+}
+
+fn port(faults: Faults) -> MemPort {
+    let mut sim = SimGrbl::new(&Machine::load("shapeoko").unwrap());
+    sim.faults = faults;
+    MemPort::new(sim, BAUD)
+}
+
+fn job(path: &Path) -> SendJob {
+    SendJob {
+        job: path.to_path_buf(),
+        rx_buffer: 128,
+        ..Default::default()
+    }
+}
+
+/// Acceptance 1: 100,000 lines, each executed once and in order, no
+/// overflow, >= 90% of the link's byte budget with character counting.
+#[test]
+fn hundred_thousand_lines_in_memory() {
+    let d = scratch("send-100k");
+    let (path, lines) = write_job(&d, 100_000);
+    let no = AtomicBool::new(false);
+    let mut p = port(Faults::default());
+    let (o, n) = job(&path).run(&mut p, &no).unwrap();
+    assert_eq!(n, lines.len());
+    assert_eq!(p.sim.overflow, 0, "receive buffer overflowed");
+    assert!(p.sim.log == lines, "executed lines differ from the job");
+    let u = o.utilisation(BAUD);
+    // send-and-wait on the first 5,000 lines, for comparison
+    let (small, _) = write_job(&d, 5_000);
+    let mut q = port(Faults::default());
+    let sr = SendJob {
+        send_response: true,
+        ..job(&small)
+    };
+    let (o2, _) = sr.run(&mut q, &no).unwrap();
+    let u2 = o2.utilisation(BAUD);
+    eprintln!(
+        "100,000 lines in {:.1} simulated s: link utilisation {:.1}% with character counting, {:.1}% send-response",
+        o.seconds,
+        100.0 * u,
+        100.0 * u2
+    );
+    assert!(u >= 0.9, "utilisation {u}");
+    assert!(u2 < u);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// Acceptance 3: error at line N stops there, names it, and nothing beyond
+/// what was already buffered is sent.
+#[test]
+fn error_stops_at_its_line() {
+    let d = scratch("send-error");
+    let (path, lines) = write_job(&d, 2_000);
+    let mut p = port(Faults {
+        error_at: Some((500, 33)),
+        ..Default::default()
+    });
+    let e = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap_err();
+    // the 500th G-code line is file line 501 (the comment comes first)
+    assert!(e.0.contains("line 501") && e.0.contains("error:33"), "{e}");
+    assert!(e.0.contains("invalid target"), "{e}");
+    let upto: usize = lines[..500].iter().map(|l| l.len() + 1).sum();
+    assert!(p.written <= upto + 127 + 16, "{} bytes written", p.written);
+    assert!(!p.sim.log.contains(&lines[499]));
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+#[test]
+fn alarm_stops_with_its_meaning() {
+    let d = scratch("send-alarm");
+    let (path, _) = write_job(&d, 1_000);
+    let mut p = port(Faults {
+        alarm_at: Some((300, 1)),
+        ..Default::default()
+    });
+    let e = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap_err();
+    assert!(e.0.contains("ALARM:1") && e.0.contains("hard limit"), "{e}");
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// Acceptance 3: a disconnect is one clear error, the journal holds the
+/// last acknowledged line, and resuming from it completes the job with
+/// every line executed exactly once overall.
+#[test]
+fn disconnect_then_resume_from_the_journal() {
+    let d = scratch("send-disconnect");
+    let (path, lines) = write_job(&d, 3_000);
+    let mut p = port(Faults {
+        disconnect_after: Some(20_000),
+        ..Default::default()
+    });
+    let no = AtomicBool::new(false);
+    let j = job(&path);
+    let e = j.run(&mut p, &no).unwrap_err();
+    assert!(
+        e.0.contains("disconnected") && e.0.contains("--resume"),
+        "{e}"
+    );
+    let last = sender::journal_last(&j.journal_path()).unwrap();
+    let done = p.sim.log.len();
+    assert!(done > 100 && done < lines.len());
+    // the journal's last line is the last line the machine executed
+    let text = std::fs::read_to_string(&path).unwrap();
+    let file_line = relievo::gcode::parse::strip(text.lines().nth(last - 1).unwrap());
+    assert_eq!(p.sim.log.last(), Some(&file_line));
+    // reconnect (the board resets) and resume
+    p.reconnect();
+    let r = SendJob {
+        resume: Some(j.journal_path()),
+        ..job(&path)
+    };
+    r.run(&mut p, &no).unwrap();
+    // the re-entry preamble's lines are not job lines
+    let set: std::collections::HashSet<&String> = lines.iter().collect();
+    let executed: Vec<&String> = p.sim.log.iter().filter(|l| set.contains(l)).collect();
+    let job_lines: Vec<&String> = lines.iter().collect();
+    assert!(
+        executed == job_lines,
+        "not every line exactly once, in order"
+    );
+    eprintln!(
+        "disconnect after {done} executed lines (journal: file line {last}); resumed: {} lines executed overall, preamble {:?}",
+        executed.len(),
+        p.sim.log.iter().filter(|l| !set.contains(l)).collect::<Vec<_>>()
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// Acceptance 4: --check reports the bad line and moves nothing.
+#[test]
+fn check_mode_reports_and_moves_nothing() {
+    let d = scratch("send-check");
+    let path = d.join("bad.nc");
+    std::fs::write(
+        &path,
+        "G21 G90\nG1 X1 Y1 F500\nG1 X2 Y2\nG38.2 Z-1 F10\nG1 X3\n",
+    )
+    .unwrap();
+    let mut p = port(Faults::default());
+    let e = SendJob {
+        check: true,
+        ..job(&path)
+    }
+    .run(&mut p, &AtomicBool::new(false))
+    .unwrap_err();
+    assert!(e.0.contains("line 4") && e.0.contains("error:20"), "{e}");
+    assert!(p.sim.log.is_empty(), "moved: {:?}", p.sim.log);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// Acceptance 5: noise in the replies neither crashes the sender nor
+/// loses a line.
+#[test]
+fn garbled_replies_lose_nothing() {
+    let d = scratch("send-garble");
+    let (path, lines) = write_job(&d, 5_000);
+    let mut p = port(Faults {
+        garble: 0.3,
+        ..Default::default()
+    });
+    job(&path).run(&mut p, &AtomicBool::new(false)).unwrap();
+    assert!(p.sim.log == lines);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// Acceptance 2: the real serial code over a pseudo-terminal, the
+/// simulated machine in another process.
+#[test]
+fn send_over_a_pseudo_terminal() {
+    use std::io::{BufRead, BufReader};
+    let d = scratch("send-pty");
+    let (path, lines) = write_job(&d, 2_000);
+    let log = d.join("executed.log");
+    let mut sim = bin()
+        .args([
+            "grbl-sim",
+            "--machine",
+            "shapeoko",
+            "--speed",
+            "20",
+            "--log",
+        ])
+        .arg(&log)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut dev = String::new();
+    BufReader::new(sim.stdout.take().unwrap())
+        .read_line(&mut dev)
+        .unwrap();
+    let dev = dev.trim().to_string();
+    assert!(dev.starts_with("/dev/"), "grbl-sim printed '{dev}'");
+    let out = run(&["send", path.to_str().unwrap(), "--port", &dev, "--check"]);
+    let _ = sim.kill();
+    let _ = sim.wait();
+    ok(&out);
+    let executed: Vec<String> = std::fs::read_to_string(&log)
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect();
+    assert!(
+        executed == lines,
+        "{} of {} lines executed",
+        executed.len(),
+        lines.len()
+    );
+    eprintln!("{}", String::from_utf8_lossy(&out.stderr).trim());
+    std::fs::remove_dir_all(d).unwrap();
+}
