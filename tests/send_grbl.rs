@@ -249,3 +249,32 @@ fn send_over_a_pseudo_terminal() {
     eprintln!("{}", String::from_utf8_lossy(&out.stderr).trim());
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// The real serial path stops on an error too: one error line naming the
+/// job line and GRBL's meaning, a non-zero exit.
+#[test]
+fn error_over_a_pseudo_terminal() {
+    use std::io::{BufRead, BufReader};
+    let d = scratch("send-pty-error");
+    let (path, _) = write_job(&d, 500);
+    let mut sim = bin()
+        .args(["grbl-sim", "--speed", "20", "--error-at", "120:22"])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut dev = String::new();
+    BufReader::new(sim.stdout.take().unwrap())
+        .read_line(&mut dev)
+        .unwrap();
+    let out = run(&["send", path.to_str().unwrap(), "--port", dev.trim(), "-q"]);
+    let _ = sim.kill();
+    let _ = sim.wait();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("line 121") && err.contains("error:22") && err.contains("feed rate"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}
