@@ -15,16 +15,16 @@ use std::sync::atomic::AtomicBool;
 
 const BAUD: u32 = 115200;
 
-/// A job of `n` short distinct moves after a header line.
+/// A job of `n` short distinct moves after a header line: a spiral of
+/// 0.02 mm segments, so GRBL's planner keeps full speed through the
+/// corners and executes them faster than the link brings them.
 fn write_job(dir: &Path, n: usize) -> (PathBuf, Vec<String>) {
-    let mut text = String::from("(test job)\nG21 G90 G94\nG1 X0 Y0 F6000\n");
-    let mut lines = vec!["G21G90G94".to_string(), "G1X0Y0F6000".to_string()];
+    let mut text = String::from("(test job)\nG21 G90 G94\nG1 X15 Y10 F6000\n");
+    let mut lines = vec!["G21G90G94".to_string(), "G1X15Y10F6000".to_string()];
     for k in 1..=n {
-        // ~0.02 mm apart, zigzag: GRBL executes them faster than the link
-        // brings them
-        let (row, i) = (k / 1000, k % 1000);
-        let i = if row % 2 == 0 { i } else { 999 - i };
-        let (x, y) = (i as f64 * 0.02, row as f64 * 0.02);
+        let r = 5.0 + k as f64 * 2e-5;
+        let t = k as f64 * 0.02 / r;
+        let (x, y) = (10.0 + r * t.cos(), 10.0 + r * t.sin());
         let l = format!(
             "G1X{}Y{}",
             relievo::gcode::emit::num(x),
@@ -144,8 +144,23 @@ fn disconnect_then_resume_from_the_journal() {
     let text = std::fs::read_to_string(&path).unwrap();
     let file_line = relievo::gcode::parse::strip(text.lines().nth(last - 1).unwrap());
     assert_eq!(p.sim.log.last(), Some(&file_line));
-    // reconnect (the board resets) and resume
+    // reconnect: the board resets in motion and raises ALARM:3; the
+    // sender refuses to resume into an alarm; the operator unlocks
     p.reconnect();
+    let refused = SendJob {
+        resume: Some(j.journal_path()),
+        ..job(&path)
+    }
+    .run(&mut p, &no)
+    .unwrap_err();
+    assert!(
+        refused.0.contains("alarm") && refused.0.contains("unlock"),
+        "{refused}"
+    );
+    {
+        let mut r = sender::Replies::new(&mut p);
+        assert_eq!(r.command("$X", 5.0).unwrap().last().unwrap(), "ok");
+    }
     let r = SendJob {
         resume: Some(j.journal_path()),
         ..job(&path)

@@ -48,6 +48,12 @@ impl SendJob {
         };
         let mut r = Replies::new(port);
         r.handshake(opts.welcome_timeout)?;
+        if r.state()?.is_some_and(|s| s.starts_with("Alarm")) {
+            bail!(
+                "GRBL is in alarm (position may be lost after a reset in motion): check the \
+                 machine, then `relievo machine home` or `unlock` on this port, and send again"
+            );
+        }
         if self.check {
             let errors = sender::check(&mut r, &lines, &opts)?;
             if !errors.is_empty() {

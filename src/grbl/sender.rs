@@ -203,6 +203,20 @@ impl<'a> Replies<'a> {
         bail!("no GRBL welcome within {timeout} s, not even after a soft reset")
     }
 
+    /// The machine state from a status report (None if none comes).
+    pub fn state(&mut self) -> Result<Option<String>> {
+        self.port.write_all(&[STATUS])?;
+        let until = self.port.now() + 1.0;
+        while self.port.now() < until {
+            if let Some(l) = self.next(until - self.port.now())? {
+                if let Some(st) = parse_status(&l) {
+                    return Ok(Some(st.state));
+                }
+            }
+        }
+        Ok(None)
+    }
+
     /// Send one command and collect its reply lines up to `ok`/`error`.
     pub fn command(&mut self, cmd: &str, timeout: f64) -> Result<Vec<String>> {
         self.port.write_all(format!("{cmd}\n").as_bytes())?;

@@ -71,6 +71,12 @@ pub struct SimGrbl {
     pub disconnected: bool,
     travel: DVec3,
     max_rate: DVec3,
+    /// mm/s^2 per axis, and GRBL's junction deviation ($11), mm.
+    accel: DVec3,
+    junction: f64,
+    /// Direction and exit speed (mm/s) of the last queued move.
+    last_dir: Option<DVec3>,
+    last_exit: f64,
     rng: u64,
 }
 
@@ -104,6 +110,10 @@ impl SimGrbl {
             disconnected: false,
             travel: DVec3::new(m.travel.x, m.travel.y, m.travel.z),
             max_rate: DVec3::new(m.max_rate.x, m.max_rate.y, m.max_rate.z),
+            accel: DVec3::new(m.acceleration.x, m.acceleration.y, m.acceleration.z),
+            junction: m.junction_deviation,
+            last_dir: None,
+            last_exit: 0.0,
             rng: 0x9e3779b97f4a7c15,
         };
         s.say(&format!("\r\n{WELCOME}"));
@@ -189,6 +199,7 @@ impl SimGrbl {
         let moving = !self.planner.is_empty();
         self.rx.clear();
         self.planner.clear();
+        self.last_dir = None;
         self.held_left = None;
         self.check = false;
         self.planned = self.done;
@@ -327,28 +338,64 @@ impl SimGrbl {
     /// An alarm stops motion at once and locks G-code out until $X or $H.
     fn raise(&mut self, code: u32) {
         self.planner.clear();
+        self.last_dir = None;
         self.held_left = None;
         self.planned = self.done;
         self.alarm = Some(code);
         self.say(&format!("ALARM:{code}"));
     }
 
+    /// Queue a move. Its time follows GRBL's planner in a forward-only
+    /// form: it enters at the junction speed its corner with the previous
+    /// move allows (junction deviation, as GRBL computes it), never faster
+    /// than the previous move got, and accelerates toward its rate.
     fn queue(&mut self, target: DVec3) {
         let d = target - self.planned;
         let dist = d.length();
         if dist <= 0.0 {
             return;
         }
-        // at the feed (or, for rapids, the slowest axis' rate over the move)
-        let rate = if self.motion == 0 {
+        let u = d / dist;
+        // the slowest axis' rate and acceleration along the move
+        let along = |lim: DVec3| {
             (0..3)
-                .filter(|&k| d[k] != 0.0)
-                .map(|k| self.max_rate[k] * dist / d[k].abs())
+                .filter(|&k| u[k] != 0.0)
+                .map(|k| lim[k] / u[k].abs())
                 .fold(f64::INFINITY, f64::min)
-        } else {
-            self.feed.unwrap_or(1.0)
         };
-        let duration = dist / (rate / 60.0);
+        let top = along(self.max_rate) / 60.0;
+        let v = if self.motion == 0 {
+            top
+        } else {
+            (self.feed.unwrap_or(1.0) / 60.0).min(top)
+        };
+        let a = along(self.accel);
+        let entry = match (self.planner.is_empty(), self.last_dir) {
+            (false, Some(prev)) => {
+                let cos = (-prev.dot(u)).clamp(-1.0, 1.0);
+                let vj = if cos > 0.999999 {
+                    0.0
+                } else {
+                    let s2 = (0.5 * (1.0 - cos)).sqrt();
+                    if s2 > 0.999999 {
+                        f64::INFINITY // straight on
+                    } else {
+                        (a * self.junction * s2 / (1.0 - s2)).sqrt()
+                    }
+                };
+                vj.min(self.last_exit).min(v)
+            }
+            _ => 0.0,
+        };
+        let ramp = (v * v - entry * entry) / (2.0 * a);
+        let (duration, exit) = if dist >= ramp {
+            ((v - entry) / a + (dist - ramp) / v, v)
+        } else {
+            let ve = (entry * entry + 2.0 * a * dist).sqrt();
+            ((ve - entry) / a, ve)
+        };
+        self.last_dir = Some(u);
+        self.last_exit = exit;
         if self.planner.is_empty() {
             self.block_end = self.now + duration;
         }
@@ -511,12 +558,17 @@ mod tests {
     #[test]
     fn planner_runs_in_simulated_time_and_the_buffer_overflows_loudly() {
         let mut s = machine();
-        // 10 mm at 600 mm/min takes 1 s
+        // 10 mm at 600 mm/min from rest (400 mm/s^2): 1.0125 s; the
+        // second move goes straight on at full speed: 1 s
         send(&mut s, "G1 X10 F600\nG1 X20\n");
         assert!(send(&mut s, "?").starts_with("<Run"));
+        s.advance(1.0);
+        assert!(send(&mut s, "?").contains("MPos:0.000"));
         s.advance(1.5);
         assert!(send(&mut s, "?").contains("MPos:10.000"));
-        s.advance(2.0);
+        s.advance(2.01);
+        assert!(send(&mut s, "?").starts_with("<Run"));
+        s.advance(2.02);
         assert!(send(&mut s, "?").starts_with("<Idle|MPos:20.000"));
         // 16 queued moves fill the planner; the 16th waits in the buffer
         let mv: String = (1..=16).map(|k| format!("G1 X{k}\n")).collect();
