@@ -269,6 +269,10 @@ pub fn parse_status(l: &str) -> Option<Status> {
     })
 }
 
+/// Seconds without any reply (not even to a status poll) that mean the
+/// link is dead.
+const SILENCE: f64 = 10.0;
+
 /// Stream `lines` (with `preamble` lines sent first, unjournaled).
 /// Returns when every line is acknowledged, or at the first error or
 /// alarm (in check mode errors are collected and streaming goes on).
@@ -311,6 +315,8 @@ pub fn stream(
     let poll = 1.0 / opts.poll_hz.clamp(0.1, 5.0);
     let mut last_poll = f64::MIN;
     let mut idle_since: Option<f64> = None;
+    let mut stop_time: Option<f64> = None;
+    let mut last_reply = start;
     let mut progress = Progress::new(opts.progress, lines.len());
     loop {
         if cancel.load(Ordering::Relaxed) && !stopping {
@@ -344,6 +350,18 @@ pub fn stream(
             break;
         }
         let now = r.port.now();
+        // after a stop, lines still buffered behind a held planner may
+        // never be answered: collect replies for a moment, then report
+        if stopping && now - *stop_time.get_or_insert(now) > 1.0 {
+            break;
+        }
+        // status polls are answered even in a hold: silence is a dead link
+        if now - last_reply > SILENCE {
+            bail!(
+                "no reply from GRBL for {SILENCE} s with {} line(s) unacknowledged (link down?)",
+                inflight.len()
+            );
+        }
         if now - last_poll >= poll {
             r.port.write_all(&[STATUS])?;
             last_poll = now;
@@ -351,6 +369,7 @@ pub fn stream(
         let Some(l) = r.next(poll / 2.0)? else {
             continue;
         };
+        last_reply = r.port.now();
         if l == "ok" || l.starts_with("error:") {
             let Some((idx, len)) = inflight.pop_front() else {
                 continue; // a reply to nothing of ours
