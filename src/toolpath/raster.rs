@@ -69,9 +69,9 @@ fn clip(w: f64, h: f64, c: f64, s: f64, v: f64) -> Option<(f64, f64)> {
     (t0 <= t1).then_some((t0, t1))
 }
 
-/// Every row dropped onto the CL surface in parallel, split where the CL
-/// surface may sag under a gap (dips are left to the exact check after
-/// merging, which refines where needed).
+/// Every row dropped onto the CL surface in parallel, split where the
+/// contacts' caps bound the CL surface away from a gap's chord (the exact
+/// check after merging refines whatever else is needed).
 pub fn drop_rows(
     hf: &HeightField,
     tool: &Tool,
@@ -79,7 +79,7 @@ pub fn drop_rows(
     floor: f64,
 ) -> Vec<Vec<DVec3>> {
     rows.par_iter()
-        .map(|row| drop_along(hf, tool, row, floor, Refine::Rise))
+        .map(|row| drop_along(hf, tool, row, floor, Refine::Bounds))
         .collect()
 }
 
@@ -116,7 +116,7 @@ pub fn zigzag(
                 .collect();
             // the link, merged, replaces the pass's first point (merging
             // may lift a run's end, never lower it)
-            let l = merge(&drop_along(hf, tool, &link, floor, Refine::Rise), tol);
+            let l = merge(&drop_along(hf, tool, &link, floor, Refine::Bounds), tol);
             out.extend_from_slice(&l[1..]);
             out.extend_from_slice(&pass[1..]);
             continue;
