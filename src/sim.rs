@@ -5,9 +5,9 @@
 //! the tool exactly: for each cell within the tool's radius of the move,
 //! the lowest point of the swept tool surface above that cell is found in
 //! closed form (ball: capsule of the ball centre's path; flat: the disc's
-//! interval on the move; V-bit: the stationary point of a convex function)
-//! or, for the tapered ball, by golden-section search of the same convex
-//! function. Min is order-free, so the stock is cut in parallel row bands,
+//! interval on the move; V-bit: the stationary point of a convex function;
+//! tapered ball: the tip sphere's capsule and the cone's stationary point
+//! where the cell is beyond the tip sphere). Min is order-free, so the stock is cut in parallel row bands,
 //! each band taking its moves in job order (which keeps the test of rapids
 //! against the stock as it was at that moment exact).
 

@@ -269,13 +269,12 @@ fn suzanne_finish_is_clean() {
     judge("carve-suzanne", Some(&fixture("suzanne.stl")));
 }
 
-/// Flat and V finishing: no gouge either (the final exact check catches
-/// samples meeting a flat's rim between CL points). The tapered ball works
-/// too but its sweep is a numeric search, too slow for the suite (18 s).
+/// Flat, V and tapered-ball finishing: no gouge either (the final exact
+/// check catches samples meeting a flat's rim between CL points).
 #[test]
 fn other_tools_finish_without_gouging() {
     let d = scratch("carve-tools");
-    for tool in ["flat:2", "vbit:60:6"] {
+    for tool in ["flat:2", "vbit:60:6", "taperball:0.25:5:3.175"] {
         let job = d.join("job.nc");
         ok(&run(&[
             "carve",
