@@ -292,13 +292,7 @@ fn other_tools_finish_without_gouging() {
             job.to_str().unwrap(),
             "-q",
         ]));
-        let report = simulate_report(
-            &job,
-            &d.join("job-relief.png"),
-            &d.join("cut.png"),
-            &["--machine", "shapeoko"],
-        );
-        let gouge = report["max_gouge_mm"].as_f64().unwrap();
+        let gouge = judged_gouge(&d, &job);
         eprintln!("{tool}: gouge {gouge:.5} mm");
         assert!(gouge <= 0.001, "{tool}: gouge {gouge} mm");
     }

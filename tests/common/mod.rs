@@ -102,3 +102,22 @@ pub fn demo_relief(png: &Path, res: &str) {
         "-q",
     ]));
 }
+
+/// Simulate `dir/job.nc`-style `job` against `dir/job-relief.png` on the
+/// Shapeoko profile (cut into `dir/cut.png`); assert no rapid went through
+/// stock; return the report's deepest gouge (mm).
+pub fn judged_gouge(dir: &Path, job: &Path) -> f64 {
+    let report = simulate_report(
+        job,
+        &dir.join("job-relief.png"),
+        &dir.join("cut.png"),
+        &["--machine", "shapeoko"],
+    );
+    let rapids = report["rapids_in_stock"].as_array().unwrap();
+    assert!(
+        rapids.is_empty(),
+        "{}: rapids through stock at lines {rapids:?}",
+        job.display()
+    );
+    report["max_gouge_mm"].as_f64().unwrap()
+}
