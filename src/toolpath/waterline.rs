@@ -23,6 +23,8 @@ const LEVEL_TOL: f64 = 1e-4;
 /// The CL surface on a node grid: node (i, j) at (x0 + i p, y0 + j p).
 pub struct ClGrid {
     pub z: Grid<f64>,
+    /// Lowest and highest CL value of each row.
+    row_range: Vec<(f64, f64)>,
     pub x0: f64,
     pub y0: f64,
     pub p: f64,
@@ -57,7 +59,15 @@ impl ClGrid {
                     .collect()
             })
             .collect();
+        let row_range = rows
+            .iter()
+            .map(|r| {
+                r.iter()
+                    .fold((f64::MAX, f64::MIN), |(l, h), &z| (l.min(z), h.max(z)))
+            })
+            .collect();
         ClGrid {
+            row_range,
             z: Grid::from_vec(nx, ny, rows.concat()),
             x0,
             y0,
@@ -135,6 +145,14 @@ pub fn contours(g: &ClGrid, hf: &HeightField, tool: &Tool, level: f64) -> Vec<Co
         .into_par_iter()
         .map(|j| {
             let mut segs = Vec::new();
+            // rows wholly below or above the level hold no contour
+            let (lo, hi) = (
+                g.row_range[j].0.min(g.row_range[j + 1].0),
+                g.row_range[j].1.max(g.row_range[j + 1].1),
+            );
+            if level > hi || level <= lo {
+                return segs;
+            }
             for i in 0..w - 1 {
                 let c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
                 let up = c.map(|(a, b)| above(a, b));
@@ -197,7 +215,17 @@ pub fn contours(g: &ClGrid, hf: &HeightField, tool: &Tool, level: f64) -> Vec<Co
             let (pa, pb) = (g.pos(ai, aj), g.pos(bi, bj));
             let (lo, hi) = if above(ai, aj) { (pb, pa) } else { (pa, pb) };
             let slope = g.slope(ai, aj).max(g.slope(bi, bj));
-            (e, (crossing(hf, tool, g.floor, level, lo, hi), slope))
+            // where the grid's straight line between the nodes crosses
+            let (zl, zh) = if above(ai, aj) {
+                (g.at(bi, bj), g.at(ai, aj))
+            } else {
+                (g.at(ai, aj), g.at(bi, bj))
+            };
+            let guess = ((level - zl) / (zh - zl)).clamp(0.0, 1.0);
+            (
+                e,
+                (crossing(hf, tool, g.floor, level, lo, hi, guess), slope),
+            )
         })
         .collect();
     let mut seen = std::collections::HashSet::new();
@@ -241,8 +269,18 @@ fn crossing(
     level: f64,
     lo: (f64, f64),
     hi: (f64, f64),
+    guess: f64,
 ) -> DVec3 {
-    let cl = |x: f64, y: f64| hf.drop(tool, x, y).unwrap_or(floor).max(floor);
+    // successive probes are close: each starts from the last contact
+    let mut stack = Vec::new();
+    let mut hint = None;
+    let mut cl = |x: f64, y: f64| match hf.drop_from(tool, x, y, hint, &mut stack) {
+        Some((z, c)) => {
+            hint = Some(c);
+            z.max(floor)
+        }
+        None => floor,
+    };
     let at = |t: f64| {
         (
             snap(lo.0 + (hi.0 - lo.0) * t),
@@ -259,8 +297,14 @@ fn crossing(
         );
     }
     let len = (hi.0 - lo.0).hypot(hi.1 - lo.1);
+    // the grid's linear guess first, then a narrow bracket around it
+    let mut probes = [guess, guess - 0.02, guess + 0.02].into_iter();
     while (b - a) * len > GRID {
-        let m = (a + b) / 2.0;
+        let m = match probes.next() {
+            Some(g) if g > a && g < b => g,
+            Some(_) => continue,
+            None => (a + b) / 2.0,
+        };
         let q = at(m);
         let z = cl(q.0, q.1);
         if z >= level {
@@ -311,7 +355,7 @@ pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour
                     .into_iter()
                     .find(|o| cl(o.x, o.y) < level);
                 if let (true, Some(out)) = (top > level, out) {
-                    let q = crossing(hf, tool, floor, level, (out.x, out.y), (at.x, at.y));
+                    let q = crossing(hf, tool, floor, level, (out.x, out.y), (at.x, at.y), 0.5);
                     todo.push((q, b, depth + 1));
                     todo.push((a, q, depth + 1));
                     continue;
