@@ -310,19 +310,22 @@ impl ToolpathJob {
         }
         if self.finish != Finish::Raster {
             let climb = self.direction != Some(Direction::Conventional);
+            // beside a raster: waterlines on every slope of at least
+            // GENTLEST, their levels close enough to lie at most a
+            // stepover apart there
+            let dz = if self.finish == Finish::RasterWaterline {
+                step * waterline::GENTLEST
+            } else {
+                step
+            };
             let loops = t.time("waterline", || {
-                self.waterlines(&hf, &tool, relief, floor, step, climb)
+                self.waterlines(&hf, &tool, relief, floor, dz, climb)
             });
             raw_points += loops.iter().map(Vec::len).sum::<usize>();
             passes.extend(loops.into_iter().map(|pts| Pass { pts, clear_z: safe }));
             what.push(format!(
-                "waterline {}, Z step {:.4} mm",
+                "waterline {}, Z step {dz:.4} mm",
                 if climb { "climb" } else { "conventional" },
-                if self.finish == Finish::RasterWaterline {
-                    step * waterline::GENTLEST
-                } else {
-                    step
-                }
             ));
         }
         ops.push(Op {
@@ -356,9 +359,10 @@ impl ToolpathJob {
         for (file, group) in groups {
             let text = t.time("g-code", || self.emit(&group, relief, shift, &m));
             let prog = t.time("time estimate", || crate::gcode::program(&text))?;
-            time_s += sim::estimate_time(&prog, &m);
+            let secs = sim::estimate_time(&prog, &m);
+            time_s += secs;
             lines += text.lines().count();
-            let text = with_estimate(text, &prog, &m);
+            let text = with_estimate(text, secs, &m);
             out.add(&file, text.into_bytes());
             written.push(file);
             progs.push(prog);
@@ -437,7 +441,8 @@ impl ToolpathJob {
         Ok(s)
     }
 
-    /// Waterline passes, level by level from the top, nearest first.
+    /// Waterline passes `dz` apart, level by level from the top, nearest
+    /// first.
     fn waterlines(
         &self,
         hf: &HeightField,
@@ -450,14 +455,6 @@ impl ToolpathJob {
         let g = waterline::ClGrid::new(hf, tool, relief.width_mm, relief.height_mm, floor);
         let mut out: Vec<Vec<DVec3>> = Vec::new();
         let steep_only = self.finish == Finish::RasterWaterline;
-        // beside a raster: waterlines on every slope of at least
-        // GENTLEST, their levels close enough to lie at most a stepover
-        // apart there
-        let dz = if steep_only {
-            dz * waterline::GENTLEST
-        } else {
-            dz
-        };
         for level in waterline::levels(&g, dz) {
             let (w, h) = (relief.width_mm, relief.height_mm);
             let keep = |p: DVec3, slope: f64| {
@@ -581,15 +578,11 @@ impl ToolpathJob {
 }
 
 /// Insert the time estimate after the header comments.
-fn with_estimate(mut text: String, prog: &crate::gcode::Program, m: &Machine) -> String {
+fn with_estimate(mut text: String, secs: f64, m: &Machine) -> String {
     let mut line = String::new();
     crate::gcode::emit::comment(
         &mut line,
-        &format!(
-            "estimated time: {} on {}",
-            sim::hms(sim::estimate_time(prog, m)),
-            m.name
-        ),
+        &format!("estimated time: {} on {}", sim::hms(secs), m.name),
     );
     let at = text
         .lines()

@@ -62,7 +62,7 @@ impl Sweep {
         let w2 = wx * wx + wy * wy;
         let r2 = radius * radius;
         if self.axy < 1e-18 {
-            return (w2 < r2).then_some((f64::NEG_INFINITY, f64::INFINITY));
+            return (w2 <= r2).then_some((f64::NEG_INFINITY, f64::INFINITY));
         }
         let b = wx * self.d.x + wy * self.d.y;
         let disc = b * b - self.axy * (w2 - r2);
@@ -73,21 +73,11 @@ impl Sweep {
         Some(((b - s) / self.axy, (b + s) / self.axy))
     }
 
-    /// Parameter interval over which the cell is within `radius` of the axis.
+    /// The same, on the move (t in [0, 1]).
     #[inline]
     fn within(&self, wx: f64, wy: f64, radius: f64) -> Option<(f64, f64)> {
-        let w2 = wx * wx + wy * wy;
-        let r2 = radius * radius;
-        if self.axy < 1e-18 {
-            return (w2 <= r2).then_some((0.0, 1.0));
-        }
-        let b = wx * self.d.x + wy * self.d.y;
-        let disc = b * b - self.axy * (w2 - r2);
-        if disc < 0.0 {
-            return None;
-        }
-        let s = disc.sqrt();
-        let (lo, hi) = (((b - s) / self.axy).max(0.0), ((b + s) / self.axy).min(1.0));
+        let (lo, hi) = self.within_unclamped(wx, wy, radius)?;
+        let (lo, hi) = (lo.max(0.0), hi.min(1.0));
         (lo <= hi).then_some((lo, hi))
     }
 

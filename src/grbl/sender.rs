@@ -5,9 +5,7 @@
 //! lines, and a safe re-entry to resume from one.
 
 use super::port::Port;
-use super::{
-    alarm_meaning, error_meaning, CYCLE_START, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS,
-};
+use super::{alarm_meaning, error_meaning, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS};
 use crate::bail;
 use crate::error::{Context, Result};
 use crate::gcode::parse::{parse_line, strip};
@@ -601,10 +599,4 @@ impl Progress {
             b.finish_and_clear();
         }
     }
-}
-
-/// Resume a paused machine (feed hold) — used after Ctrl-C by callers
-/// that choose to continue.
-pub fn resume(port: &mut dyn Port) -> Result<()> {
-    port.write_all(&[CYCLE_START])
 }
