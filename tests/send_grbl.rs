@@ -219,24 +219,13 @@ fn garbled_replies_lose_nothing() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
-/// Acceptance 2: the real serial code over a pseudo-terminal, the
-/// simulated machine in another process.
-#[test]
-fn send_over_a_pseudo_terminal() {
+/// Start `relievo grbl-sim` with `args`: its process and the
+/// pseudo-terminal it serves.
+fn grbl_sim(args: &[&str]) -> (std::process::Child, String) {
     use std::io::{BufRead, BufReader};
-    let d = scratch("send-pty");
-    let (path, lines) = write_job(&d, 2_000);
-    let log = d.join("executed.log");
     let mut sim = bin()
-        .args([
-            "grbl-sim",
-            "--machine",
-            "shapeoko",
-            "--speed",
-            "20",
-            "--log",
-        ])
-        .arg(&log)
+        .arg("grbl-sim")
+        .args(args)
         .stdout(std::process::Stdio::piped())
         .spawn()
         .unwrap();
@@ -246,6 +235,24 @@ fn send_over_a_pseudo_terminal() {
         .unwrap();
     let dev = dev.trim().to_string();
     assert!(dev.starts_with("/dev/"), "grbl-sim printed '{dev}'");
+    (sim, dev)
+}
+
+/// Acceptance 2: the real serial code over a pseudo-terminal, the
+/// simulated machine in another process.
+#[test]
+fn send_over_a_pseudo_terminal() {
+    let d = scratch("send-pty");
+    let (path, lines) = write_job(&d, 2_000);
+    let log = d.join("executed.log");
+    let (mut sim, dev) = grbl_sim(&[
+        "--machine",
+        "shapeoko",
+        "--speed",
+        "20",
+        "--log",
+        log.to_str().unwrap(),
+    ]);
     let out = run(&["send", path.to_str().unwrap(), "--port", &dev, "--check"]);
     let _ = sim.kill();
     let _ = sim.wait();
@@ -269,19 +276,10 @@ fn send_over_a_pseudo_terminal() {
 /// job line and GRBL's meaning, a non-zero exit.
 #[test]
 fn error_over_a_pseudo_terminal() {
-    use std::io::{BufRead, BufReader};
     let d = scratch("send-pty-error");
     let (path, _) = write_job(&d, 500);
-    let mut sim = bin()
-        .args(["grbl-sim", "--speed", "20", "--error-at", "120:22"])
-        .stdout(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut dev = String::new();
-    BufReader::new(sim.stdout.take().unwrap())
-        .read_line(&mut dev)
-        .unwrap();
-    let out = run(&["send", path.to_str().unwrap(), "--port", dev.trim(), "-q"]);
+    let (mut sim, dev) = grbl_sim(&["--speed", "20", "--error-at", "120:22"]);
+    let out = run(&["send", path.to_str().unwrap(), "--port", &dev, "-q"]);
     let _ = sim.kill();
     let _ = sim.wait();
     let err = String::from_utf8_lossy(&out.stderr);
