@@ -91,6 +91,24 @@ impl Machine {
         Ok(m)
     }
 
+    /// The flat end mill in the tool table to rough with ahead of
+    /// `finish`: the largest up to 1/4 in, so that it clears fast and still
+    /// reaches between the relief's forms. (name, spec)
+    pub fn roughing_tool(&self, finish: &crate::tool::Tool) -> Option<(String, String)> {
+        use crate::tool::Tool;
+        if matches!(finish, Tool::Flat { .. }) {
+            return None;
+        }
+        self.tools
+            .iter()
+            .filter_map(|(k, e)| match Tool::parse(&e.tool) {
+                Ok(Tool::Flat { d }) if d <= 6.35 + 1e-9 => Some((d, k.clone(), e.tool.clone())),
+                _ => None,
+            })
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+            .map(|(_, k, s)| (k, s))
+    }
+
     /// A tool from the table by name (case-insensitive), else a spec.
     pub fn tool(&self, spec: &str) -> Result<crate::tool::Tool> {
         let hit = self

@@ -383,6 +383,42 @@ struct CutOpts {
     /// Also write the simulated cut, shaded (PNG).
     #[arg(long)]
     preview: Option<PathBuf>,
+    /// Light of the preview: azimuth (clockwise from the panel's top
+    /// edge) and elevation, degrees [default: 315,35].
+    #[arg(long, value_parser = parse_pair, allow_negative_numbers = true)]
+    light: Option<(f64, f64)>,
+    /// Write cuts deeper than the material allows the tool (the header and
+    /// the summary say where).
+    #[arg(long)]
+    allow_deep_cuts: bool,
+    /// Where Z0 is set: the stock top (roughing leaves a touch-off pad
+    /// for the next tool) or the stock's bottom, the spoilboard (needs
+    /// --stock).
+    #[arg(long, value_enum, default_value_t = relievo::cam::ZZero::Top)]
+    z_zero: relievo::cam::ZZero,
+    /// Units of the G-code (flags stay in mm).
+    #[arg(long, value_enum, default_value_t = relievo::cam::Units::Mm)]
+    units: relievo::cam::Units,
+    /// Stock width x height x thickness, mm [default: the panel plus
+    /// margins, the relief's depth + 3 mm thick]; the panel is centred on
+    /// it unless --margin places it.
+    #[arg(long, value_parser = parse_stock)]
+    stock: Option<(f64, f64, f64)>,
+    /// Stock around the panel, mm (the panel sits this far from the
+    /// stock's lower-left corner).
+    #[arg(long)]
+    margin: Option<f64>,
+    /// Turn the panel a quarter (90 degrees counter-clockwise) on the machine.
+    #[arg(long, value_parser = parse_rotation)]
+    rotate: Option<bool>,
+}
+
+fn parse_rotation(s: &str) -> Result<bool, String> {
+    match s.trim() {
+        "90" => Ok(true),
+        "0" => Ok(false),
+        _ => Err(format!("'{s}': 0 or 90 (degrees)")),
+    }
 }
 
 impl CutOpts {
@@ -420,8 +456,17 @@ impl CutOpts {
             }),
             split: self.split,
             output,
+            allow_deep_cuts: self.allow_deep_cuts,
+            z_zero: self.z_zero,
+            units: self.units,
+            layout: relievo::cam::layout::Layout {
+                stock: self.stock,
+                margin: self.margin,
+                rotate: self.rotate.unwrap_or(false),
+            },
             svg: self.svg,
             preview: self.preview,
+            light: self.light,
             relief_name,
         }
     }
@@ -429,6 +474,18 @@ impl CutOpts {
 
 fn report_cam(s: &relievo::cam::CamSummary, quiet: bool, verbose: bool) {
     if !quiet {
+        for n in &s.notes {
+            println!("{n}");
+        }
+        println!("{}", s.engagement.summary());
+        println!(
+            "rapids {:.1} m, cutting {:.1} m; simulated gouge {:.4} mm, residual max {:.3} / mean {:.4} mm",
+            s.rapid_mm / 1000.0,
+            s.cut_mm / 1000.0,
+            s.gouge,
+            s.residual.0,
+            s.residual.1
+        );
         eprintln!(
             "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}",
             s.written

@@ -32,8 +32,10 @@ pub struct Cutting {
     /// mm/min.
     pub plunge: f64,
     pub rpm: f64,
-    /// Roughing layer depth, mm.
+    /// Deepest cut at partial width (the roughing layer), mm.
     pub step_down: f64,
+    /// Deepest full-width (slotting) cut, mm.
+    pub slot_depth: f64,
     /// Percent of the diameter.
     pub rough_stepover: f64,
     /// Percent of the diameter.
@@ -41,7 +43,8 @@ pub struct Cutting {
 }
 
 impl Material {
-    /// The entry nearest diameter `d` (by ratio), step-down scaled to `d`.
+    /// The entry nearest diameter `d` (by ratio), step-down and slotting
+    /// depth scaled to `d`.
     pub fn cutting_for(&self, d: f64) -> Option<Cutting> {
         let c = self.cutting.iter().min_by(|a, b| {
             let ka = (a.d / d).ln().abs();
@@ -50,6 +53,7 @@ impl Material {
         })?;
         Some(Cutting {
             step_down: c.step_down * d / c.d,
+            slot_depth: c.slot_depth * d / c.d,
             ..c.clone()
         })
     }

@@ -132,11 +132,16 @@ impl SimulateJob {
         }
         let mut cut = Grid::new(w, h, 0.0f32);
         let tool = self.tool.as_deref().map(Tool::parse).transpose()?;
-        let (rapids, tool) = t
-            .time("cut", || sim::cut_program(&stock, &mut cut, &prog, tool))
+        let (rapids, moves, runs) = t
+            .time("cut", || {
+                sim::cut_program_measured(&stock, &mut cut, &prog, tool)
+            })
             .map_err(|e| crate::Error(format!("{what}: {e}")))?;
-        let (gouge, residual, mean, dev) =
-            t.time("compare", || sim::deviation(&stock, &cut, &relief));
+        let tool = runs[runs.len() - 1].2;
+        let engagement = sim::Engagement::measure(&prog, &moves, &runs, stock.pitch);
+        let (gouge, residual, mean, dev) = t.time("compare", || {
+            sim::deviation(&stock, &cut, &relief, (0.0, 0.0))
+        });
         let report = Report {
             max_gouge_mm: gouge,
             max_residual_mm: residual,
@@ -146,6 +151,7 @@ impl SimulateJob {
             out_of_travel: sim::out_of_travel(&prog, &machine, self.travel_origin),
             time_s: t.time("time estimate", || sim::estimate_time(&prog, &machine)),
             lines: prog.lines,
+            engagement,
         };
         let mut out = Outputs::default();
         t.time("encode", || {

@@ -97,6 +97,35 @@ impl Tool {
         }
     }
 
+    /// Width of the cutting surface at `depth` above the tip (mm): the
+    /// widest cut the tool makes that deep.
+    pub fn width_at(&self, depth: f64) -> f64 {
+        let r = self.radius();
+        if self.profile(r) <= depth || depth.is_nan() {
+            return 2.0 * r;
+        }
+        let (mut lo, mut hi) = (0.0, r);
+        for _ in 0..40 {
+            let mid = 0.5 * (lo + hi);
+            if self.profile(mid) > depth {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        2.0 * lo
+    }
+
+    /// Diameter the stepover, the scallop and the cutting data go by: the
+    /// tip's for a tapered ball (its shank never touches a finished
+    /// surface), the cutting diameter otherwise.
+    pub fn working_diameter(&self) -> f64 {
+        match *self {
+            Tool::TaperBall { tip_r, .. } => 2.0 * tip_r,
+            t => 2.0 * t.radius(),
+        }
+    }
+
     /// The spec string that parses back to this tool.
     pub fn spec(&self) -> String {
         match *self {

@@ -30,7 +30,7 @@ pub struct Segment {
 }
 
 /// A program reduced to moves.
-#[derive(Debug, Default)]
+#[derive(Debug, Default, Clone)]
 pub struct Program {
     pub segments: Vec<Segment>,
     /// Seconds of G4 dwell.

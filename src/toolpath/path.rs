@@ -15,6 +15,11 @@ pub const RISE: f64 = 5e-3;
 /// this keeps every gouge of a finishing pass under 1 micrometre.
 pub const MERGE_DIP: f64 = 7e-4;
 
+/// Ramp entry angle into the material.
+pub const RAMP_DEG: f64 = 5.0;
+/// Most back-and-forth legs of one ramp.
+pub const RAMP_LEGS: usize = 64;
+
 /// The resolution of coordinates in the G-code (mm).
 pub const GRID: f64 = 1e-4;
 
@@ -523,4 +528,44 @@ pub fn travel_height(hf: &HeightField, tool: &Tool, lift: f64, a: DVec3, b: DVec
             hf.drop(tool, q.x, q.y).map_or(f64::MIN, |z| z + lift)
         })
         .fold(a.z.max(b.z), f64::max)
+}
+
+/// Enter the pass at `top` (the material's top there) by ramping back and
+/// forth along its first stretch at RAMP_DEG instead of plunging, never
+/// below the pass itself. A short first stretch takes more legs (at most
+/// RAMP_LEGS, steeper beyond that); only a pass shorter than a quarter of
+/// the radius plunges.
+pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
+    let depth = top - pts[0].z;
+    let mut len = 0.0;
+    let mut m = 0;
+    while m + 1 < pts.len() && len < 4.0 * r {
+        len += (pts[m + 1] - pts[m]).truncate().length();
+        m += 1;
+    }
+    if depth <= 1e-3 || len < 0.25 * r {
+        return pts.to_vec();
+    }
+    let per_leg = len * RAMP_DEG.to_radians().tan();
+    let legs = ((depth / per_leg).ceil() as usize).clamp(1, RAMP_LEGS);
+    let legs = legs + legs % 2; // end back at the start
+    let slope = depth / (legs as f64 * len);
+    let mut out = vec![DVec3::new(pts[0].x, pts[0].y, top)];
+    let mut dist = 0.0;
+    for leg in 0..legs {
+        let idx: Vec<usize> = if leg % 2 == 0 {
+            (1..=m).collect()
+        } else {
+            (0..m).rev().collect()
+        };
+        for i in idx {
+            let prev = *out.last().unwrap();
+            dist += (pts[i] - prev).truncate().length();
+            let z = (top - dist * slope).max(pts[i].z);
+            out.push(DVec3::new(pts[i].x, pts[i].y, z));
+        }
+    }
+    out.pop(); // the start again, at its own depth:
+    out.extend_from_slice(pts);
+    out
 }

@@ -20,21 +20,27 @@ use rayon::prelude::*;
 
 /// Height above the (known upper bound of) material for travels, mm.
 const CLEARANCE: f64 = 1.0;
-/// Ramp entry angle into the material.
-const RAMP_DEG: f64 = 5.0;
 
-pub struct Params {
+pub struct Params<'a> {
     pub tool: Tool,
     pub stepover: f64,
     pub step_down: f64,
     pub stock_to_leave: f64,
     pub angle: f64,
+    /// Rows cover this rectangle of the panel: x0, y0, x1, y1 (mm).
+    pub region: [f64; 4],
+    /// The highest material within the tool's radius of a point, where
+    /// earlier operations have cut the stock; `None`: untouched stock.
+    /// Rows are cut at a layer only where material lies above it.
+    pub material: Option<&'a (dyn Fn(f64, f64) -> f64 + Sync)>,
 }
 
-/// The roughing passes for a `w` x `h` panel whose background is `floor`.
-pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Result<Vec<Pass>> {
+/// The roughing passes over `p.region` of a relief whose background is
+/// `floor`.
+pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
     let stl = p.stock_to_leave;
     let big = match p.tool {
+        t if stl == 0.0 => t,
         Tool::Flat { d } => Tool::Flat { d: d + 2.0 * stl },
         Tool::Ball { d } => Tool::Ball { d: d + 2.0 * stl },
         t => bail!(
@@ -58,7 +64,12 @@ pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Resul
         }
     };
     // the offset CL surface along every row, once for all layers
-    let rows = super::raster::rows(w, h, p.angle, p.stepover, hf.pitch);
+    let [x0, y0, x1, y1] = p.region;
+    let rows: Vec<Vec<(f64, f64)>> =
+        super::raster::rows(x1 - x0, y1 - y0, p.angle, p.stepover, hf.pitch)
+            .into_iter()
+            .map(|r| r.into_iter().map(|(x, y)| (x + x0, y + y0)).collect())
+            .collect();
     let cl: Vec<Vec<DVec3>> = rows
         .par_iter()
         .map(|row| {
@@ -79,6 +90,12 @@ pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Resul
                 .collect()
         })
         .collect();
+    // the material over each row point, if earlier operations cut some
+    let top: Option<Vec<Vec<f64>>> = p.material.map(|f| {
+        cl.par_iter()
+            .map(|row| row.iter().map(|q| f(q.x, q.y)).collect())
+            .collect()
+    });
     let gap_max = (4.0 * p.tool.radius() / hf.pitch).ceil() as usize;
     let mut out = Vec::new();
     for k in 0..n as isize {
@@ -86,7 +103,11 @@ pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Resul
         let mut prev_end: Option<DVec3> = None;
         for (r, row) in cl.iter().enumerate() {
             // material remains where the surface is below the last layer
-            let active: Vec<bool> = row.iter().map(|q| q.z < above - 1e-4).collect();
+            let active: Vec<bool> = row
+                .iter()
+                .enumerate()
+                .map(|(i, q)| q.z < above - 1e-4 && top.as_ref().is_none_or(|t| t[r][i] > z + 1e-3))
+                .collect();
             let mut runs: Vec<(usize, usize)> = Vec::new();
             let mut i = 0;
             while i < row.len() {
@@ -115,13 +136,19 @@ pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Resul
                 if r % 2 == 1 {
                     pts.reverse();
                 }
-                let top = above.max(pts[0].z);
+                let top = match &top {
+                    Some(t) => {
+                        let i = if r % 2 == 1 { b } else { a };
+                        t[r][i].min(above).max(pts[0].z)
+                    }
+                    None => above.max(pts[0].z),
+                };
                 let clear = match prev_end {
                     Some(e) => super::path::travel_height(hf, &big, stl, e, pts[0]).max(above),
                     None => 0.0,
                 } + CLEARANCE;
                 prev_end = pts.last().copied();
-                let pts = ramp(&pts, top, p.tool.radius());
+                let pts = super::path::ramp(&pts, top, p.tool.radius());
                 out.push(Pass {
                     pts,
                     clear_z: clear,
@@ -130,44 +157,6 @@ pub fn passes(hf: &HeightField, w: f64, h: f64, floor: f64, p: &Params) -> Resul
         }
     }
     Ok(out)
-}
-
-/// Enter the pass at `top` (the material's top there) by ramping back and
-/// forth along its first stretch at RAMP_DEG instead of plunging, never
-/// below the pass itself. Short passes plunge.
-fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
-    let depth = top - pts[0].z;
-    let mut len = 0.0;
-    let mut m = 0;
-    while m + 1 < pts.len() && len < 4.0 * r {
-        len += (pts[m + 1] - pts[m]).truncate().length();
-        m += 1;
-    }
-    if depth <= 1e-3 || len < r {
-        return pts.to_vec();
-    }
-    let per_leg = len * RAMP_DEG.to_radians().tan();
-    let legs = ((depth / per_leg).ceil() as usize).max(1);
-    let legs = legs + legs % 2; // end back at the start
-    let slope = depth / (legs as f64 * len);
-    let mut out = vec![DVec3::new(pts[0].x, pts[0].y, top)];
-    let mut dist = 0.0;
-    for leg in 0..legs {
-        let idx: Vec<usize> = if leg % 2 == 0 {
-            (1..=m).collect()
-        } else {
-            (0..m).rev().collect()
-        };
-        for i in idx {
-            let prev = *out.last().unwrap();
-            dist += (pts[i] - prev).truncate().length();
-            let z = (top - dist * slope).max(pts[i].z);
-            out.push(DVec3::new(pts[i].x, pts[i].y, z));
-        }
-    }
-    out.pop(); // the start again, at its own depth:
-    out.extend_from_slice(pts);
-    out
 }
 
 #[cfg(test)]
@@ -179,14 +168,17 @@ mod tests {
         let pts: Vec<DVec3> = (0..50)
             .map(|i| DVec3::new(i as f64 * 0.2, 0.0, -2.0))
             .collect();
-        let r = ramp(&pts, 0.0, 1.5);
+        let r = super::super::path::ramp(&pts, 0.0, 1.5);
         assert_eq!(r[0], DVec3::new(0.0, 0.0, 0.0));
         let k = r.len() - pts.len();
         assert_eq!(&r[k..], &pts[..]);
         for w in r.windows(2) {
             let dz = w[0].z - w[1].z;
             let dxy = (w[1] - w[0]).truncate().length();
-            assert!(dz <= dxy * RAMP_DEG.to_radians().tan() + 1e-9, "{w:?}");
+            assert!(
+                dz <= dxy * super::super::path::RAMP_DEG.to_radians().tan() + 1e-9,
+                "{w:?}"
+            );
         }
         assert!(r[..k].iter().all(|q| q.z >= -2.0));
     }

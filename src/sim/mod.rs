@@ -20,6 +20,14 @@ use crate::tool::Tool;
 use glam::DVec3;
 use rayon::prelude::*;
 
+pub mod engage;
+
+/// Stretches of a program cut by one tool: (first segment, end, tool).
+pub type ToolRuns = Vec<(usize, usize, Tool)>;
+/// Per band of rows: rapids into stock, and what each move removed.
+type BandCut = (Vec<usize>, Vec<(u32, MoveCut)>);
+pub use engage::{Engagement, MoveCut, Over, ToolEngagement};
+
 /// The block of material and its sampling.
 #[derive(Clone, Copy, Debug)]
 pub struct Stock {
@@ -61,6 +69,9 @@ pub struct Report {
     pub out_of_travel: Vec<usize>,
     pub time_s: f64,
     pub lines: usize,
+    /// Per tool: largest axial depth of cut, radial engagement and
+    /// slotting depth, with their lines; plunges into material.
+    pub engagement: Engagement,
 }
 
 impl Report {
@@ -88,7 +99,7 @@ impl Report {
             list(&self.out_of_travel),
             hms(self.time_s),
             self.lines
-        )
+        ) + "\n" + &self.engagement.summary()
     }
 }
 
@@ -118,7 +129,8 @@ fn cells_in(stock: &Stock, w: usize, span: Option<(f64, f64)>) -> Option<(usize,
 /// sphere unless the previous move ended there and so already cut it) in a
 /// branch-free f32 loop, the capsule's side only on the band where its
 /// lowest points can lie.
-fn ball_rows(
+#[allow(clippy::too_many_arguments)]
+fn ball_rows<const STATS: bool>(
     stock: &Stock,
     rows: &mut [f32],
     ja: usize,
@@ -126,20 +138,22 @@ fn ball_rows(
     sw: &Sweep,
     continues: bool,
     floor: f32,
+    mc: &mut MoveCut,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
         // SAFETY: the CPU has the features this copy is compiled for.
-        unsafe { ball_rows_avx2(stock, rows, ja, w, sw, continues, floor) };
+        unsafe { ball_rows_avx2::<STATS>(stock, rows, ja, w, sw, continues, floor, mc) };
         return;
     }
-    ball_rows_body(stock, rows, ja, w, sw, continues, floor)
+    ball_rows_body::<STATS>(stock, rows, ja, w, sw, continues, floor, mc)
 }
 
 /// The same loops compiled for 8-lane AVX2 vectors.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-unsafe fn ball_rows_avx2(
+#[allow(clippy::too_many_arguments)]
+unsafe fn ball_rows_avx2<const STATS: bool>(
     stock: &Stock,
     rows: &mut [f32],
     ja: usize,
@@ -147,12 +161,14 @@ unsafe fn ball_rows_avx2(
     sw: &Sweep,
     continues: bool,
     floor: f32,
+    mc: &mut MoveCut,
 ) {
-    ball_rows_body(stock, rows, ja, w, sw, continues, floor)
+    ball_rows_body::<STATS>(stock, rows, ja, w, sw, continues, floor, mc)
 }
 
 #[inline(always)]
-fn ball_rows_body(
+#[allow(clippy::too_many_arguments)]
+fn ball_rows_body<const STATS: bool>(
     stock: &Stock,
     rows: &mut [f32],
     ja: usize,
@@ -160,7 +176,11 @@ fn ball_rows_body(
     sw: &Sweep,
     continues: bool,
     floor: f32,
+    mc: &mut MoveCut,
 ) {
+    let (nx, ny) = engage::across(sw);
+    let (nxf, nyf) = (nx as f32, ny as f32);
+    let core2 = engage::core_radius2(sw.r) as f32;
     let p = stock.pitch;
     let len = sw.d.length();
     let uz = if len > 0.0 { sw.d.z / len } else { 0.0 };
@@ -195,6 +215,7 @@ fn ball_rows_body(
             let dy2 = ((y - cy) * (y - cy)) as f32;
             let x0 = (stock.x0 + (i0 as f64 + 0.5) * p - cx) as f32;
             let pf = p as f32;
+            let oc = ((cx - sw.a.x) * nx + (y - sw.a.y) * ny) as f32;
             for (k, cell) in row[i0..=i1].iter_mut().enumerate() {
                 let dx = x0 + (k as i32) as f32 * pf;
                 let q = dx * dx + dy2;
@@ -205,8 +226,13 @@ fn ball_rows_body(
                     f32::INFINITY
                 };
                 // plain compares (not f32::min) so this loop vectorizes
-                let v = if z < *cell { z } else { *cell };
-                *cell = if v > floor { v } else { floor };
+                let old = *cell;
+                let v = if z < old { z } else { old };
+                let new = if v > floor { v } else { floor };
+                *cell = new;
+                if STATS {
+                    mc.add(old - new, dx * nxf + oc, t == 1.0 && q <= core2);
+                }
             }
         }
         if !side {
@@ -229,8 +255,13 @@ fn ball_rows_body(
                 let t = (wu + zp * uzf) * inv_len;
                 let ok = disc >= 0.0 && (0.0..=1.0).contains(&t);
                 let z = if ok { base + zp } else { f32::INFINITY };
-                let v = if z < *cell { z } else { *cell };
-                *cell = if v > floor { v } else { floor };
+                let old = *cell;
+                let v = if z < old { z } else { old };
+                let new = if v > floor { v } else { floor };
+                *cell = new;
+                if STATS {
+                    mc.add(old - new, wx * nxf + wy * nyf, false);
+                }
             }
         }
     }
@@ -246,6 +277,35 @@ pub fn cut_program(
     prog: &Program,
     tool: Option<Tool>,
 ) -> crate::Result<(Vec<usize>, Tool)> {
+    let runs = tool_runs(prog, tool)?;
+    let mut hits = Vec::new();
+    for (from, to, tool) in &runs {
+        hits.extend(cut(stock, heights, &prog.segments[*from..*to], *tool));
+    }
+    Ok((hits, runs[runs.len() - 1].2))
+}
+
+/// As `cut_program`, also measuring what every move removed (one entry
+/// per segment of `prog`), with the tool of each stretch.
+pub fn cut_program_measured(
+    stock: &Stock,
+    heights: &mut Grid<f32>,
+    prog: &Program,
+    tool: Option<Tool>,
+) -> crate::Result<(Vec<usize>, Vec<MoveCut>, ToolRuns)> {
+    let runs = tool_runs(prog, tool)?;
+    let mut hits = Vec::new();
+    let mut moves = Vec::with_capacity(prog.segments.len());
+    for (from, to, tool) in &runs {
+        let (h, m) = cut_impl::<true>(stock, heights, &prog.segments[*from..*to], *tool);
+        hits.extend(h);
+        moves.extend(m);
+    }
+    Ok((hits, moves, runs))
+}
+
+/// The stretches of `prog` cut by one tool: (first segment, end, tool).
+pub fn tool_runs(prog: &Program, tool: Option<Tool>) -> crate::Result<ToolRuns> {
     let mut runs: Vec<(usize, Tool)> = match tool {
         Some(t) => vec![(0, t)],
         None => prog
@@ -258,17 +318,28 @@ pub fn cut_program(
         crate::bail!("no tool given: use --tool or a (tool: SPEC) comment in the job");
     }
     runs[0].0 = 0;
-    let mut hits = Vec::new();
-    for (n, &(from, tool)) in runs.iter().enumerate() {
-        let to = runs.get(n + 1).map_or(prog.segments.len(), |t| t.0);
-        hits.extend(cut(stock, heights, &prog.segments[from.min(to)..to], tool));
-    }
-    Ok((hits, runs[runs.len() - 1].1))
+    let n = prog.segments.len();
+    Ok((0..runs.len())
+        .map(|k| {
+            let to = runs.get(k + 1).map_or(n, |t| t.0);
+            (runs[k].0.min(to), to, runs[k].1)
+        })
+        .collect())
 }
 
 /// Cut `stock` (top heights, row 0 = top) by the moves `segs` with
 /// `tool`. Returns the job lines of rapids that cut into stock.
 pub fn cut(stock: &Stock, heights: &mut Grid<f32>, segs: &[Segment], tool: Tool) -> Vec<usize> {
+    cut_impl::<false>(stock, heights, segs, tool).0
+}
+
+/// The cut, and with STATS what each move removed.
+fn cut_impl<const STATS: bool>(
+    stock: &Stock,
+    heights: &mut Grid<f32>,
+    segs: &[Segment],
+    tool: Tool,
+) -> (Vec<usize>, Vec<MoveCut>) {
     let (w, h) = (heights.w, heights.h);
     let p = stock.pitch;
     let r = tool.radius();
@@ -285,24 +356,31 @@ pub fn cut(stock: &Stock, heights: &mut Grid<f32>, segs: &[Segment], tool: Tool)
         }
     }
     let floor = -stock.thickness as f32;
-    let mut touched: Vec<usize> = heights
+    let core2 = engage::core_radius2(r);
+    let per_band: Vec<BandCut> = heights
         .data
         .par_chunks_mut(w * BAND)
         .zip(bins.par_iter())
         .enumerate()
-        .flat_map_iter(|(band, (rows, bin))| {
+        .map(|(band, (rows, bin))| {
             let mut hits = Vec::new();
+            let mut stats = Vec::new();
             let ja = band * BAND;
             let jb = ja + rows.len() / w;
             for &k in bin {
                 let seg = &segs[k as usize];
                 let sw = Sweep::new(seg.a, seg.b, tool);
                 let rapid = seg.kind == Kind::Rapid;
+                let mut mc = MoveCut::NONE;
                 if !rapid && matches!(tool, Tool::Ball { .. }) {
                     let continues = k > 0 && segs[k as usize - 1].b == seg.a;
-                    ball_rows(stock, rows, ja, w, &sw, continues, floor);
+                    ball_rows::<STATS>(stock, rows, ja, w, &sw, continues, floor, &mut mc);
+                    if STATS && mc.axial > 0.0 {
+                        stats.push((k, mc));
+                    }
                     continue;
                 }
+                let (nx, ny) = engage::across(&sw);
                 let mut hit = false;
                 for j in ja..jb {
                     let (_, y) = stock.centre(0, j);
@@ -318,20 +396,44 @@ pub fn cut(stock: &Stock, heights: &mut Grid<f32>, segs: &[Segment], tool: Tool)
                             if rapid && z < *cell as f64 - TOUCH && *cell > floor {
                                 hit = true;
                             }
-                            *cell = (z as f32).max(floor);
+                            let new = (z as f32).max(floor);
+                            if STATS {
+                                let (ex, ey) = (x - seg.b.x, y - seg.b.y);
+                                mc.add(
+                                    *cell - new,
+                                    ((x - sw.a.x) * nx + wy * ny) as f32,
+                                    ex * ex + ey * ey <= core2,
+                                );
+                            }
+                            *cell = new;
                         }
                     }
                 }
                 if hit {
                     hits.push(seg.line);
                 }
+                if STATS && mc.axial > 0.0 {
+                    stats.push((k, mc));
+                }
             }
-            hits
+            (hits, stats)
         })
         .collect();
+    let mut touched = Vec::new();
+    let mut moves = if STATS {
+        vec![MoveCut::NONE; segs.len()]
+    } else {
+        Vec::new()
+    };
+    for (hits, stats) in per_band {
+        touched.extend(hits);
+        for (k, mc) in stats {
+            moves[k as usize].merge(&mc);
+        }
+    }
     touched.sort_unstable();
     touched.dedup();
-    touched
+    (touched, moves)
 }
 
 /// Lines whose moves leave the machine's travel, with the travel box's
@@ -449,8 +551,14 @@ pub fn target_at(r: &Relief, x: f64, y: f64) -> Option<f64> {
     Some(top * (1.0 - ty) + bot * ty - r.depth_mm)
 }
 
-/// Compare the cut with the relief: (max gouge, max residual, mean residual).
-pub fn deviation(stock: &Stock, cut: &Grid<f32>, relief: &Relief) -> (f64, f64, f64, Grid<f32>) {
+/// Compare the cut with the relief whose lower-left corner lies at `at`:
+/// (max gouge, max residual, mean residual, deviation per cell).
+pub fn deviation(
+    stock: &Stock,
+    cut: &Grid<f32>,
+    relief: &Relief,
+    at: (f64, f64),
+) -> (f64, f64, f64, Grid<f32>) {
     let mut dev = Grid::new(cut.w, cut.h, f32::NAN);
     dev.data
         .par_chunks_mut(cut.w)
@@ -458,7 +566,7 @@ pub fn deviation(stock: &Stock, cut: &Grid<f32>, relief: &Relief) -> (f64, f64, 
         .for_each(|(j, row)| {
             for (i, d) in row.iter_mut().enumerate() {
                 let (x, y) = stock.centre(i, j);
-                if let Some(t) = target_at(relief, x, y) {
+                if let Some(t) = target_at(relief, x - at.0, y - at.1) {
                     *d = (*cut.get(i, j) as f64 - t) as f32;
                 }
             }

@@ -1,0 +1,86 @@
+//! The simulator as the judge of every job relievo writes: each file cut
+//! in turn into the stock it states, every move's engagement measured,
+//! the result compared with the relief.
+
+use super::layout::Plan;
+use crate::error::Result;
+use crate::gcode::{Kind, Program};
+use crate::grid::Grid;
+use crate::relief::Relief;
+use crate::sim::{self, Engagement, MoveCut, Over, Stock};
+use crate::tool::Tool;
+
+pub struct Judged {
+    pub stock: Stock,
+    /// The cut surface (0 = stock top).
+    pub cut: Grid<f32>,
+    pub engagement: Engagement,
+    /// Residual material over the relief: max and mean, mm.
+    pub residual: (f64, f64),
+    pub gouge: f64,
+    /// Per file: every segment's cut, and the tool stretches.
+    moves: Vec<(Vec<MoveCut>, sim::ToolRuns)>,
+}
+
+/// The programs (in stock-top Z once `z_shift` is taken off) cut in turn.
+pub fn run(progs: &[Program], relief: &Relief, plan: &Plan, z_shift: f64) -> Result<Judged> {
+    let stock = plan.stock_in_job(relief.pitch_mm());
+    let (w, h) = stock.cells();
+    let mut cut = Grid::new(w, h, 0.0f32);
+    let mut engagement = Engagement::default();
+    let mut moves = Vec::new();
+    for prog in progs {
+        let shifted = lowered(prog, z_shift);
+        let (_, m, runs) = sim::cut_program_measured(&stock, &mut cut, &shifted, None)?;
+        engagement.absorb(Engagement::measure(&shifted, &m, &runs, stock.pitch));
+        moves.push((m, runs));
+    }
+    let at = (plan.shift.x, plan.shift.y);
+    let (gouge, res, mean, _) = sim::deviation(&stock, &cut, relief, at);
+    Ok(Judged {
+        stock,
+        cut,
+        engagement,
+        residual: (res, mean),
+        gouge,
+        moves,
+    })
+}
+
+/// A program's moves with every Z lowered by `dz`.
+pub fn lowered(prog: &Program, dz: f64) -> Program {
+    let mut p = prog.clone();
+    for s in &mut p.segments {
+        s.a.z -= dz;
+        s.b.z -= dz;
+    }
+    p
+}
+
+/// The first move over its tool's limits: (file index, what).
+pub fn first_over(
+    j: &Judged,
+    progs: &[Program],
+    limits: &dyn Fn(&Tool) -> (f64, f64),
+) -> Option<(usize, Over)> {
+    j.moves
+        .iter()
+        .zip(progs)
+        .enumerate()
+        .find_map(|(k, ((m, runs), prog))| {
+            Engagement::first_over(prog, m, runs, j.stock.pitch, limits).map(|o| (k, o))
+        })
+}
+
+/// Rapid and cutting travel over all programs, mm.
+pub fn travel(progs: &[Program]) -> (f64, f64) {
+    let (mut rapid, mut feed) = (0.0, 0.0);
+    for s in progs.iter().flat_map(|p| &p.segments) {
+        let l = (s.b - s.a).length();
+        match s.kind {
+            Kind::Rapid => rapid += l,
+            Kind::Feed => feed += l,
+        }
+    }
+    (rapid, feed)
+}

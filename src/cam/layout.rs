@@ -1,0 +1,243 @@
+//! Where the panel sits: on the stock (size, margin, placement), on the
+//! machine (travel, a quarter turn), and where the job's X0 Y0 is. Also
+//! the touch-off pad that roughing leaves for zeroing the next tool.
+
+use super::Origin;
+use crate::bail;
+use crate::error::Result;
+use crate::grid::Grid;
+use crate::machine::Machine;
+use crate::relief::Relief;
+use crate::sim::Stock;
+use glam::DVec3;
+
+/// The user's layout flags.
+#[derive(Clone, Debug, Default)]
+pub struct Layout {
+    /// Stock width x height x thickness, mm.
+    pub stock: Option<(f64, f64, f64)>,
+    /// Stock around the panel on every side, mm.
+    pub margin: Option<f64>,
+    /// Turn the panel a quarter (counter-clockwise, seen from above).
+    pub rotate: bool,
+}
+
+/// The layout resolved for one panel.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// Stock width, height, thickness, mm.
+    pub stock: (f64, f64, f64),
+    /// The panel's lower-left corner on the stock, mm from the stock's.
+    pub panel_at: (f64, f64),
+    /// Panel coordinates + shift = job coordinates (Z untouched).
+    pub shift: DVec3,
+}
+
+impl Layout {
+    /// Resolve the layout of `relief` (already turned), and refuse a job
+    /// that does not fit the machine: with the reason, and a quarter turn
+    /// suggested when that would fit.
+    pub fn plan(&self, relief: &Relief, m: &Machine, safe_z: f64, origin: Origin) -> Result<Plan> {
+        let (pw, ph, depth) = (relief.width_mm, relief.height_mm, relief.depth_mm);
+        let margin = self.margin.unwrap_or(0.0);
+        if !(margin.is_finite() && margin >= 0.0) {
+            bail!("--margin {margin}: must be 0 or more");
+        }
+        let stock = self
+            .stock
+            .unwrap_or((pw + 2.0 * margin, ph + 2.0 * margin, depth + 3.0));
+        let (sw, sh, st) = stock;
+        if !(sw.is_finite() && sh.is_finite() && st.is_finite()) {
+            bail!("--stock {sw}x{sh}x{st}: sizes must be finite");
+        }
+        if sw + 1e-9 < pw + 2.0 * margin || sh + 1e-9 < ph + 2.0 * margin {
+            bail!(
+                "--stock {sw}x{sh}x{st}: smaller than the {pw:.1} x {ph:.1} mm panel{}",
+                if margin > 0.0 {
+                    format!(" with a {margin} mm margin")
+                } else {
+                    String::new()
+                }
+            );
+        }
+        if st + 1e-9 < depth {
+            bail!("--stock {sw}x{sh}x{st}: thinner than the relief's depth {depth:.3} mm");
+        }
+        let panel_at = match self.margin {
+            Some(mg) => (mg, mg),
+            None => ((sw - pw) / 2.0, (sh - ph) / 2.0),
+        };
+        let origin = match origin {
+            Origin::LowerLeft => (0.0, 0.0),
+            Origin::Center => (sw / 2.0, sh / 2.0),
+        };
+        let shift = DVec3::new(
+            crate::toolpath::path::snap(panel_at.0 - origin.0),
+            crate::toolpath::path::snap(panel_at.1 - origin.1),
+            0.0,
+        );
+        let tz = depth + safe_z;
+        let fits = |w: f64, h: f64| w <= m.travel.x + 1e-9 && h <= m.travel.y + 1e-9;
+        if !fits(pw, ph) || tz > m.travel.z {
+            let turned = if self.rotate {
+                "turned by --rotate 90, "
+            } else {
+                ""
+            };
+            let hint = if tz > m.travel.z {
+                String::new()
+            } else if fits(ph, pw) {
+                if self.rotate {
+                    "; it fits as it is: leave out --rotate".into()
+                } else {
+                    "; turned a quarter it fits: add --rotate 90".into()
+                }
+            } else {
+                "; cut it in tiles with --tile".into()
+            };
+            bail!(
+                "a {pw:.1} x {ph:.1} x {tz:.1} mm job ({turned}panel and safe Z) does not fit {}'s travel {} x {} x {} mm{hint}",
+                m.name,
+                m.travel.x,
+                m.travel.y,
+                m.travel.z
+            );
+        }
+        Ok(Plan {
+            stock,
+            panel_at,
+            shift,
+        })
+    }
+}
+
+impl Plan {
+    /// The stock in panel coordinates, sampled at `pitch`.
+    pub fn stock_in_panel(&self, pitch: f64) -> Stock {
+        Stock {
+            x0: -self.panel_at.0,
+            y0: -self.panel_at.1,
+            width: self.stock.0,
+            height: self.stock.1,
+            thickness: self.stock.2,
+            pitch,
+        }
+    }
+
+    /// The stock in job coordinates.
+    pub fn stock_in_job(&self, pitch: f64) -> Stock {
+        let s = self.stock_in_panel(pitch);
+        Stock {
+            x0: s.x0 + self.shift.x,
+            y0: s.y0 + self.shift.y,
+            ..s
+        }
+    }
+
+    /// The header line the simulator reads to place stock and relief.
+    pub fn frame_comment(&self, z_shift: f64) -> String {
+        let s = self.stock_in_job(1.0);
+        format!(
+            "frame: stock X{} Y{} W{} H{} T{}, panel X{} Y{}, Z0 {}",
+            crate::gcode::emit::num(s.x0),
+            crate::gcode::emit::num(s.y0),
+            crate::gcode::emit::num(s.width),
+            crate::gcode::emit::num(s.height),
+            crate::gcode::emit::num(s.thickness),
+            crate::gcode::emit::num(self.shift.x),
+            crate::gcode::emit::num(self.shift.y),
+            if z_shift > 0.0 { "bottom" } else { "top" }
+        )
+    }
+}
+
+/// The relief turned a quarter counter-clockwise (seen from above) when
+/// `rotate`: the panel's height becomes its width.
+pub fn turned(r: &Relief, rotate: bool) -> Relief {
+    if !rotate {
+        return r.clone();
+    }
+    let (w, h) = (r.heights.w, r.heights.h);
+    let mut g = Grid::new(h, w, 0.0f32);
+    // new (i, j) shows old (w - 1 - j, i): x' = H - y, y' = x
+    for j in 0..w {
+        for i in 0..h {
+            g.set(i, j, *r.heights.get(w - 1 - j, i));
+        }
+    }
+    Relief {
+        heights: g,
+        width_mm: r.height_mm,
+        height_mm: r.width_mm,
+        depth_mm: r.depth_mm,
+    }
+}
+
+/// Where roughing leaves the touch-off pad: the `side` mm square wholly on
+/// the panel whose lowest relief point is highest (the least to cut away
+/// after). Returns its centre (panel mm) and side.
+pub fn pad_site(r: &Relief, side: f64) -> (f64, f64, f64) {
+    let p = r.pitch_mm();
+    let (w, h) = (r.heights.w, r.heights.h);
+    let n = ((side / p).round() as usize).clamp(1, w.min(h));
+    let stride = ((1.0 / p).round() as usize).max(1);
+    let mut best = (f32::NEG_INFINITY, 0, 0);
+    for j in (0..=h - n).step_by(stride) {
+        for i in (0..=w - n).step_by(stride) {
+            let mut lo = f32::INFINITY;
+            for jj in j..j + n {
+                for ii in i..i + n {
+                    lo = lo.min(*r.heights.get(ii, jj));
+                }
+            }
+            if lo > best.0 {
+                best = (lo, i, j);
+            }
+        }
+    }
+    let (_, i, j) = best;
+    let s = n as f64 * p;
+    let cx = i as f64 * p + s / 2.0;
+    let cy = r.height_mm - (j as f64 * p + s / 2.0);
+    (
+        crate::toolpath::path::snap(cx),
+        crate::toolpath::path::snap(cy),
+        s,
+    )
+}
+
+/// Set the samples of `z` (the relief's grid) under the pad to `value`.
+pub fn raise(z: &mut Grid<f64>, r: &Relief, pad: (f64, f64, f64), value: f64) {
+    let p = r.pitch_mm();
+    for j in 0..z.h {
+        let y = r.height_mm - (j as f64 + 0.5) * p;
+        for i in 0..z.w {
+            let x = (i as f64 + 0.5) * p;
+            if (x - pad.0).abs() <= pad.2 / 2.0 && (y - pad.1).abs() <= pad.2 / 2.0 {
+                z.set(i, j, value);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_quarter_turn_moves_the_upper_left_corner_to_the_upper_right() {
+        let mut g = Grid::new(3, 2, 0.0f32);
+        g.set(0, 0, 1.0); // upper-left
+        let r = Relief {
+            heights: g,
+            width_mm: 3.0,
+            height_mm: 2.0,
+            depth_mm: 1.0,
+        };
+        let t = turned(&r, true);
+        assert_eq!((t.heights.w, t.heights.h), (2, 3));
+        assert_eq!((t.width_mm, t.height_mm), (2.0, 3.0));
+        // (x, y) = (0.5, 1.5) -> (H - y, x) = (0.5, 0.5): lower-left
+        assert_eq!(*t.heights.get(0, 2), 1.0);
+    }
+}

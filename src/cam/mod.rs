@@ -1,0 +1,1056 @@
+//! The `toolpath` command as one library call: a relief in, a GRBL job out:
+//! optional roughing, then raster and/or waterline finishing, each move
+//! checked against the exact swept tool before it is written.
+
+use crate::bail;
+use crate::error::Result;
+use crate::gcode::emit::{Emitter, Settings};
+use crate::machine::Machine;
+use crate::output::{check_writable, Outputs};
+use crate::relief::Relief;
+use crate::sim;
+use crate::timing::Timings;
+use crate::tool::Tool;
+use crate::toolpath::dropcutter::HeightField;
+use crate::toolpath::{path, raster, rough, waterline, Pass};
+use glam::DVec3;
+use std::path::{Path, PathBuf};
+
+mod judge;
+pub mod layout;
+mod order;
+mod stock;
+mod view;
+
+/// Where the job's X0 Y0 is on the panel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Origin {
+    LowerLeft,
+    Center,
+}
+
+/// Finishing strategy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Finish {
+    Raster,
+    Waterline,
+    /// Raster everywhere, and waterlines wherever the CL surface slopes by
+    /// more than 1 in 10, where rows crossing the slope or a crease along
+    /// them leave wide scallops.
+    #[value(name = "raster+waterline")]
+    RasterWaterline,
+}
+
+/// Cutting direction (M3, clockwise spindle): climb keeps the material on
+/// the tool's right. `None` in a job: zigzag rasters, climb waterlines.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Direction {
+    Climb,
+    Conventional,
+}
+
+/// Roughing before the finish.
+#[derive(Clone, Debug)]
+pub struct Roughing {
+    /// Tool spec or tool-table name.
+    pub tool: String,
+    /// Layer depth, mm; `None` = the material's, else half the diameter.
+    pub step_down: Option<f64>,
+    /// `None` = the material's, else 40%.
+    pub stepover: Option<Stepover>,
+    /// Material left on the relief for the finish, mm.
+    pub stock_to_leave: f64,
+}
+
+/// Distance between raster rows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Stepover {
+    Mm(f64),
+    /// Percent of the tool diameter.
+    Percent(f64),
+    /// Scallop height (mm) left by a ball on a flat.
+    Scallop(f64),
+}
+
+impl Stepover {
+    pub fn parse(s: &str) -> std::result::Result<Stepover, String> {
+        let t = s.trim();
+        let (v, pct) = match t.strip_suffix('%') {
+            Some(p) => (p, true),
+            None => (t.strip_suffix("mm").unwrap_or(t), false),
+        };
+        let v: f64 = v
+            .trim()
+            .parse()
+            .map_err(|_| format!("'{s}': expected MM or PERCENT%"))?;
+        Ok(if pct {
+            Stepover::Percent(v)
+        } else {
+            Stepover::Mm(v)
+        })
+    }
+
+    /// The stepover in mm. A percentage and a scallop go by the tool's
+    /// working diameter: a tapered ball's tip, not its shank.
+    pub fn mm(&self, tool: &Tool) -> Result<f64> {
+        let d = tool.working_diameter();
+        let v = match *self {
+            Stepover::Mm(v) => v,
+            Stepover::Percent(p) => p / 100.0 * d,
+            Stepover::Scallop(h) => {
+                let r = match *tool {
+                    Tool::Ball { d } => d / 2.0,
+                    Tool::TaperBall { tip_r, .. } => tip_r,
+                    _ => bail!("--scallop needs a ball or tapered ball tool"),
+                };
+                if !(h > 0.0 && h < r) {
+                    bail!("--scallop {h}: must be between 0 and the ball radius");
+                }
+                2.0 * (r * r - (r - h) * (r - h)).sqrt()
+            }
+        };
+        let most = 2.0 * tool.radius();
+        if !(v.is_finite() && v > 0.0 && v <= most) {
+            bail!("stepover {v:.4} mm: must be positive and at most the tool diameter ({most} mm)");
+        }
+        Ok(v)
+    }
+}
+
+/// Where the operator sets Z0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ZZero {
+    /// On the stock top; after roughing, on the touch-off pad it leaves.
+    Top,
+    /// On the stock's bottom (the spoilboard), which survives any roughing.
+    Bottom,
+}
+
+/// Units of the G-code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Units {
+    Mm,
+    In,
+}
+
+#[derive(Clone, Debug)]
+pub struct ToolpathJob {
+    /// Finishing tool: a spec or a name in the machine's tool table.
+    pub tool: String,
+    pub finish: Finish,
+    pub direction: Option<Direction>,
+    /// `None` = the material's finishing stepover, else 10%.
+    pub stepover: Option<Stepover>,
+    pub angle: f64,
+    /// Merge tolerance, mm.
+    pub tolerance: f64,
+    /// Cutting feed, mm/min; `None` = the material's, else 1000; within
+    /// the machine's XY limit.
+    pub feed: Option<f64>,
+    /// Plunge feed, mm/min; `None` = the material's, else 300.
+    pub plunge_feed: Option<f64>,
+    /// Spindle speed; `None` = the material's, else 18000, within range.
+    pub rpm: Option<f64>,
+    /// Travel height above the stock top, mm.
+    pub safe_z: f64,
+    pub machine: String,
+    pub material: Option<String>,
+    pub origin: Origin,
+    pub rough: Option<Roughing>,
+    /// Roughing in its own file (NAME-rough.nc) instead of an M0 tool change.
+    pub split: bool,
+    /// Write cuts deeper than the tools' limits (and say so).
+    pub allow_deep_cuts: bool,
+    pub z_zero: ZZero,
+    pub units: Units,
+    /// The panel's layout on the stock and the machine.
+    pub layout: layout::Layout,
+    pub output: PathBuf,
+    /// Top view of the toolpath.
+    pub svg: Option<PathBuf>,
+    /// The simulated cut, shaded.
+    pub preview: Option<PathBuf>,
+    /// Light for the preview: azimuth and elevation, degrees.
+    pub light: Option<(f64, f64)>,
+    /// Name of the relief in the header.
+    pub relief_name: String,
+}
+
+pub struct CamSummary {
+    /// G-code lines over all files.
+    pub lines: usize,
+    /// CL points before merging (one line each if unmerged).
+    pub raw_points: usize,
+    pub time_s: f64,
+    pub stepover_mm: f64,
+    /// Every file written, the job first.
+    pub written: Vec<PathBuf>,
+    /// What the job chose or capped, for the user (also in the header).
+    pub notes: Vec<String>,
+    /// What the simulated job asks of its tools.
+    pub engagement: sim::Engagement,
+    /// Simulated residual material: max and mean, mm.
+    pub residual: (f64, f64),
+    /// Simulated deepest gouge, mm.
+    pub gouge: f64,
+    /// Rapid and cutting travel, mm.
+    pub rapid_mm: f64,
+    pub cut_mm: f64,
+    pub timings: Timings,
+}
+
+/// One tool's share of the job.
+pub(crate) struct Op {
+    title: &'static str,
+    tool: Tool,
+    settings: Settings,
+    strategy: String,
+    passes: Vec<Pass>,
+}
+
+/// How deep each tool may cut: (depth of cut, slotting depth) by the
+/// material's cutting data for its working diameter.
+struct Limits {
+    material: crate::materials::Material,
+    /// The material's name as the user should read it.
+    name: String,
+    off: bool,
+}
+
+impl Limits {
+    fn of(&self, t: &Tool) -> (f64, f64) {
+        if self.off {
+            return (f64::INFINITY, f64::INFINITY);
+        }
+        self.material
+            .cutting_for(t.working_diameter())
+            .map_or((f64::INFINITY, f64::INFINITY), |c| {
+                (c.step_down, c.slot_depth)
+            })
+    }
+    /// The deepest a fresh full-width cut may go.
+    fn layer(&self, t: &Tool) -> f64 {
+        let (d, s) = self.of(t);
+        d.min(s)
+    }
+}
+
+/// Size of the touch-off pad left by roughing, mm (a square).
+const PAD: f64 = 8.0;
+
+impl ToolpathJob {
+    pub fn run(&self, relief: &Relief) -> Result<CamSummary> {
+        let mut t = Timings::default();
+        let rough_out = rough_path(&self.output);
+        for o in [Some(&self.output), self.svg.as_ref(), self.preview.as_ref()]
+            .into_iter()
+            .flatten()
+            .chain((self.split && self.rough.is_some()).then_some(&rough_out))
+        {
+            check_writable(o)?;
+        }
+        if !(self.tolerance > 0.0 && self.tolerance <= 1.0) {
+            bail!("--tolerance {}: must be in (0, 1] mm", self.tolerance);
+        }
+        let m = Machine::load(&self.machine)?;
+        let material = self
+            .material
+            .as_deref()
+            .map(crate::materials::find)
+            .transpose()?;
+        let limits = Limits {
+            material: match &material {
+                Some(mt) => mt.clone(),
+                None => crate::materials::find("wood")?,
+            },
+            name: self
+                .material
+                .clone()
+                .unwrap_or_else(|| "wood (no --material given)".into()),
+            off: self.allow_deep_cuts,
+        };
+        let mut notes: Vec<String> = Vec::new();
+        let relief = &layout::turned(relief, self.layout.rotate);
+        let tool = m.tool(&self.tool)?;
+        let finish_settings = self.settings(&m, &tool, material.as_ref(), &mut notes)?;
+        let cutting = material
+            .as_ref()
+            .and_then(|mt| mt.cutting_for(tool.working_diameter()));
+        let stepover = self
+            .stepover
+            .or(cutting
+                .as_ref()
+                .map(|c| Stepover::Percent(c.finish_stepover)))
+            .unwrap_or(Stepover::Percent(10.0));
+        let step = stepover.mm(&tool)?;
+        let plan = self
+            .layout
+            .plan(relief, &m, finish_settings.safe_z, self.origin)?;
+        let hf = t.time("heightfield", || {
+            HeightField::new(
+                relief.heights.map(|v| *v as f64 - relief.depth_mm),
+                relief.pitch_mm(),
+            )
+        });
+        let floor = -relief.depth_mm;
+        let (pw, ph) = (relief.width_mm, relief.height_mm);
+        let panel = [0.0, 0.0, pw, ph];
+        let mut planned = stock::Planned::new(plan.stock_in_panel(relief.pitch_mm()));
+        let mut ops: Vec<Op> = Vec::new();
+        let mut raw_points = 0;
+        // roughing: asked for, or added when the finishing tool may not
+        // cut the relief's depth in one pass
+        let rough = match &self.rough {
+            Some(r) => Some(r.clone()),
+            None if relief.depth_mm > limits.layer(&tool) + sim::engage::SLACK => {
+                match m.roughing_tool(&tool) {
+                    Some((name, spec)) => {
+                        notes.push(format!(
+                            "roughing added with {name} ({spec}): the relief is {:.2} mm deep, \
+                             {} may cut {:.2} mm at once in {}",
+                            relief.depth_mm,
+                            tool.spec(),
+                            limits.layer(&tool),
+                            limits.name
+                        ));
+                        Some(Roughing {
+                            tool: name,
+                            step_down: None,
+                            stepover: None,
+                            stock_to_leave: 0.3,
+                        })
+                    }
+                    None => None,
+                }
+            }
+            None => None,
+        };
+        // the touch-off pad: Z0 for the next tool after roughing
+        let pad = (rough.is_some() && self.z_zero == ZZero::Top)
+            .then(|| layout::pad_site(relief, PAD.min(0.25 * pw.min(ph))));
+        let hf_pad = pad.map(|p| {
+            let mut z = hf.samples().clone();
+            layout::raise(&mut z, relief, p, 0.0);
+            HeightField::new(z, relief.pitch_mm())
+        });
+        let hf_main = hf_pad.as_ref().unwrap_or(&hf);
+        // finishing keeps off the pad (and a tool radius round it) until
+        // the pad's own turn at the end
+        let keep_out = pad.map(|p| p.2 / 2.0 + tool.radius() + 0.5);
+        let off_pad = |x: f64, y: f64| match (pad, keep_out) {
+            (Some(p), Some(k)) => (x - p.0).abs() > k || (y - p.1).abs() > k,
+            _ => true,
+        };
+        let keep_off_pad: Option<&(dyn Fn(f64, f64) -> bool + Sync)> =
+            pad.is_some().then_some(&off_pad);
+        if let Some(r) = &rough {
+            let rt = m.tool(&r.tool)?;
+            let settings = self.settings(&m, &rt, material.as_ref(), &mut notes)?;
+            let rc = material
+                .as_ref()
+                .and_then(|mt| mt.cutting_for(rt.working_diameter()));
+            // layers no deeper than the roughing tool may slot, nor than
+            // the finishing tool may take off the terraces they leave
+            // (the latter unless that would take more than twice the
+            // layers: a small finishing tool then steps down itself)
+            let step_down = r.step_down.unwrap_or_else(|| {
+                let own = rc
+                    .as_ref()
+                    .map_or(rt.radius(), |c| c.step_down)
+                    .min(limits.layer(&rt));
+                let fits_finish = limits.layer(&tool) - r.stock_to_leave;
+                if fits_finish >= 0.5 * own {
+                    own.min(fits_finish)
+                } else {
+                    own
+                }
+            });
+            let rstep = r
+                .stepover
+                .or(rc.as_ref().map(|c| Stepover::Percent(c.rough_stepover)))
+                .unwrap_or(Stepover::Percent(40.0))
+                .mm(&rt)?;
+            if !(step_down.is_finite() && step_down > 0.0) {
+                bail!("--step-down {step_down}: must be positive");
+            }
+            if !(r.stock_to_leave.is_finite() && r.stock_to_leave >= 0.0) {
+                bail!("--stock-to-leave {}: must be 0 or more", r.stock_to_leave);
+            }
+            let params = rough::Params {
+                tool: rt,
+                stepover: rstep,
+                step_down,
+                stock_to_leave: r.stock_to_leave,
+                angle: self.angle,
+                region: panel,
+                material: None,
+            };
+            let passes = t.time("roughing", || rough::passes(hf_main, floor, &params))?;
+            raw_points += passes.iter().map(|p| p.pts.len()).sum::<usize>();
+            let passes = t.time("roughing check", || self.checked(hf_main, &rt, passes));
+            let passes = t.time("stock", || planned.ramp_and_cut(passes, rt));
+            ops.push(Op {
+                title: "roughing",
+                tool: rt,
+                settings,
+                strategy: format!(
+                    "roughing, layers {step_down:.3} mm, stepover {rstep:.3} mm, \
+                     stock to leave {} mm",
+                    r.stock_to_leave
+                ),
+                passes,
+            });
+        }
+        // the finishing tool in layers wherever more is left than it may
+        // cut at once: what roughing could not reach, or all of a relief
+        // too deep for it when there is no roughing
+        let fd = limits.layer(&tool);
+        if let Some(op) = t.time("rest layers", || {
+            self.rest_layers(hf_main, &tool, &planned, panel, floor, fd, &finish_settings)
+        }) {
+            notes.push(format!(
+                "{} steps down in layers of {:.2} mm where more than {fd:.2} mm is left",
+                tool.spec(),
+                op.1
+            ));
+            raw_points += op.0.iter().map(|p| p.pts.len()).sum::<usize>();
+            let passes = planned.ramp_and_cut(op.0, tool);
+            ops.push(Op {
+                title: "finishing-tool layers",
+                tool,
+                settings: finish_settings.clone(),
+                strategy: format!("layers {:.3} mm with the finishing tool", op.1),
+                passes,
+            });
+        }
+        let safe = finish_settings.safe_z;
+        let mut passes = Vec::new();
+        let mut what = Vec::new();
+        if self.finish != Finish::Waterline {
+            let (main, raw) = t.time("raster", || {
+                self.raster(&hf, &tool, panel, floor, step, keep_off_pad)
+            });
+            raw_points += raw;
+            passes.extend(main.into_iter().map(|pts| Pass { pts, clear_z: safe }));
+            what.push(format!(
+                "raster {}, angle {} deg, stepover {step:.4} mm",
+                match self.direction {
+                    None => "zigzag",
+                    Some(Direction::Climb) => "one-way climb",
+                    Some(Direction::Conventional) => "one-way conventional",
+                },
+                self.angle
+            ));
+        }
+        if self.finish != Finish::Raster {
+            let climb = self.direction != Some(Direction::Conventional);
+            // beside a raster: waterlines on every slope of at least
+            // GENTLEST, their levels close enough to lie at most a
+            // stepover apart there
+            let dz = if self.finish == Finish::RasterWaterline {
+                step * waterline::GENTLEST
+            } else {
+                step
+            };
+            let loops = t.time("waterline", || {
+                self.waterlines(&hf, &tool, relief, floor, dz, climb, keep_off_pad)
+            });
+            raw_points += loops.iter().map(Vec::len).sum::<usize>();
+            let loops = t.time("order", || {
+                if self.finish == Finish::RasterWaterline {
+                    order::tour(loops, passes.last().and_then(|p| p.pts.last().copied()))
+                } else {
+                    loops
+                }
+            });
+            passes.extend(loops.into_iter().map(|pts| Pass { pts, clear_z: safe }));
+            what.push(format!(
+                "waterline {}, Z step {dz:.4} mm",
+                if climb { "climb" } else { "conventional" },
+            ));
+        }
+        // the pad goes last: layers where it stands, then the surface
+        if let Some(p) = pad {
+            let r = keep_out.unwrap_or(0.0) - p.2 / 2.0 + 0.5;
+            let win = [
+                (p.0 - p.2 / 2.0 - r).max(0.0),
+                (p.1 - p.2 / 2.0 - r).max(0.0),
+                (p.0 + p.2 / 2.0 + r).min(pw),
+                (p.1 + p.2 / 2.0 + r).min(ph),
+            ];
+            let mut pp = Vec::new();
+            let fin = t.time("stock", || planned.ramp_and_cut(passes, tool));
+            pp.extend(fin);
+            if let Some(op) =
+                self.rest_layers(&hf, &tool, &planned, win, floor, fd, &finish_settings)
+            {
+                pp.extend(planned.ramp_and_cut(op.0, tool));
+            }
+            let (surf, _) = self.raster(&hf, &tool, win, floor, step, None);
+            pp.extend(
+                planned.ramp_and_cut(
+                    surf.into_iter()
+                        .map(|pts| Pass { pts, clear_z: safe })
+                        .collect(),
+                    tool,
+                ),
+            );
+            what.push(format!("then the touch-off pad at X{:.1} Y{:.1}", p.0, p.1));
+            passes = pp;
+        } else {
+            passes = t.time("stock", || planned.ramp_and_cut(passes, tool));
+        }
+        ops.push(Op {
+            title: "finishing",
+            tool,
+            settings: finish_settings,
+            strategy: format!("finishing, {}", what.join(" + ")),
+            passes,
+        });
+        // emit: one file, tool changes with M0, or one file per tool
+        let shift = plan.shift;
+        let z_shift = match self.z_zero {
+            ZZero::Top => 0.0,
+            ZZero::Bottom => plan.stock.2,
+        };
+        let zero = match (self.z_zero, pad) {
+            (ZZero::Bottom, _) => "set Z0 on the spoilboard (the stock's bottom)".to_string(),
+            (ZZero::Top, Some(p)) => format!(
+                "set Z0 on the pad's top at X{:.1} Y{:.1} (the stock top)",
+                p.0 + shift.x,
+                p.1 + shift.y
+            ),
+            (ZZero::Top, None) => "set Z0 on the stock top again".to_string(),
+        };
+        let n_rough = ops.iter().take_while(|o| o.title == "roughing").count();
+        let groups: Vec<(PathBuf, Vec<&Op>)> = if self.split && n_rough > 0 {
+            vec![
+                (rough_out, ops[..n_rough].iter().collect()),
+                (self.output.clone(), ops[n_rough..].iter().collect()),
+            ]
+        } else {
+            vec![(self.output.clone(), ops.iter().collect())]
+        };
+        let mut header_notes = notes.clone();
+        if let Some(p) = pad {
+            header_notes.push(format!(
+                "touch-off pad: {:.0} mm square at X{:.1} Y{:.1}, left at the stock top by roughing, cut last",
+                p.2,
+                p.0 + shift.x,
+                p.1 + shift.y
+            ));
+        }
+        let mut texts = Vec::new();
+        for (file, group) in &groups {
+            let text = t.time("g-code", || {
+                self.emit(group, relief, &plan, &m, z_shift, &zero, &header_notes)
+            });
+            texts.push((file.clone(), text));
+        }
+        // the simulator judges the job: depth of cut, plunges, residual
+        let progs: Vec<crate::gcode::Program> = texts
+            .iter()
+            .map(|(_, text)| crate::gcode::program(text))
+            .collect::<Result<_>>()?;
+        let judged = t.time("judge", || judge::run(&progs, relief, &plan, z_shift))?;
+        if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.of(tl)) {
+            let what = format!(
+                "{}line {}: {} cuts {:.3} mm deep{} (allowed {:.3} mm in {})",
+                if groups.len() > 1 {
+                    format!("{}, ", groups[k].0.display())
+                } else {
+                    String::new()
+                },
+                o.line,
+                o.tool.spec(),
+                o.depth,
+                if o.slotting { " at full width" } else { "" },
+                o.limit,
+                limits.name
+            );
+            bail!("{what}: rough first (--rough), lower --step-down, or pass --allow-deep-cuts");
+        }
+        if self.allow_deep_cuts {
+            let lim = Limits {
+                off: false,
+                ..limits
+            };
+            if let Some((_, o)) = judge::first_over(&judged, &progs, &|tl| lim.of(tl)) {
+                notes.push(format!(
+                    "--allow-deep-cuts: line {} cuts {:.3} mm deep with {} (limit {:.3} mm)",
+                    o.line,
+                    o.depth,
+                    o.tool.spec(),
+                    o.limit
+                ));
+            }
+        }
+        if self.finish == Finish::Waterline {
+            notes.push(format!(
+                "waterline alone leaves up to {:.3} mm (mean {:.3} mm) on gentle slopes, \
+                 where its loops lie far apart; raster+waterline finishes them",
+                judged.residual.0, judged.residual.1
+            ));
+        }
+        let mut out = Outputs::default();
+        let (mut lines, mut time_s) = (0, 0.0);
+        let mut written = Vec::new();
+        let extra: Vec<String> = notes
+            .iter()
+            .filter(|n| !header_notes.contains(n))
+            .cloned()
+            .collect();
+        for ((file, text), prog) in texts.into_iter().zip(&progs) {
+            let secs = sim::estimate_time(prog, &m);
+            time_s += secs;
+            lines += text.lines().count() + extra.len() + 1;
+            let mut text = with_comments(text, &extra);
+            text = with_comments(
+                text,
+                &[format!("estimated time: {} on {}", sim::hms(secs), m.name)],
+            );
+            out.add(&file, text.into_bytes());
+            written.push(file);
+        }
+        // the job comes first in the list
+        written.rotate_right(1);
+        if let Some(svg) = &self.svg {
+            let doc = t.time("svg", || view::top_view(&progs, relief, &plan, z_shift));
+            out.add(svg, doc.into_bytes());
+            written.push(svg.clone());
+        }
+        if let Some(pv) = &self.preview {
+            let png = t.time("preview", || {
+                view::simulated_preview(&judged, relief, self.light)
+            });
+            out.add(pv, png?);
+            written.push(pv.clone());
+        }
+        t.time("write", || out.commit())?;
+        let (rapid_mm, cut_mm) = judge::travel(&progs);
+        Ok(CamSummary {
+            lines,
+            raw_points,
+            time_s,
+            stepover_mm: step,
+            written,
+            notes,
+            engagement: judged.engagement,
+            residual: judged.residual,
+            gouge: judged.gouge,
+            rapid_mm,
+            cut_mm,
+            timings: t,
+        })
+    }
+
+    /// Passes cleaned for the machine: merged within the tolerance, then
+    /// every move checked exactly.
+    fn checked(&self, hf: &HeightField, tool: &Tool, passes: Vec<Pass>) -> Vec<Pass> {
+        passes
+            .into_iter()
+            .map(|p| Pass {
+                pts: path::verify(hf, tool, &path::merge(&p.pts, self.tolerance)),
+                clear_z: p.clear_z,
+            })
+            .collect()
+    }
+
+    /// The finishing tool in layers over `region` wherever the planned
+    /// stock holds more above the relief than it may cut at once (`most`);
+    /// None where nothing is. Returns the passes and the layer depth.
+    #[allow(clippy::too_many_arguments)]
+    fn rest_layers(
+        &self,
+        hf: &HeightField,
+        tool: &Tool,
+        planned: &stock::Planned,
+        region: [f64; 4],
+        floor: f64,
+        most: f64,
+        s: &Settings,
+    ) -> Option<(Vec<Pass>, f64)> {
+        let left = planned.left_above(hf, region, tool);
+        // (sampled a quarter radius apart: keep a fifth in hand)
+        if left <= 0.8 * most {
+            return None;
+        }
+        // room for the scallops and terraces the layers leave
+        let layer = 0.5 * most.min(left);
+        let r = tool.radius();
+        let material = |x: f64, y: f64| planned.highest(x, y, r);
+        let params = rough::Params {
+            tool: *tool,
+            stepover: 0.4 * tool.working_diameter(),
+            step_down: layer,
+            stock_to_leave: 0.0,
+            angle: self.angle,
+            region,
+            material: Some(&material),
+        };
+        let passes = rough::passes(hf, floor, &params).ok()?;
+        let passes: Vec<Pass> = self
+            .checked(hf, tool, passes)
+            .into_iter()
+            .map(|p| Pass {
+                // the layers' own travels go over the relief, not over
+                // material earlier operations left: travel at safe Z
+                clear_z: s.safe_z,
+                ..p
+            })
+            .collect();
+        (!passes.is_empty()).then_some((passes, layer))
+    }
+
+    /// The raster over `region`, only where `keep` holds: zigzag runs of
+    /// whole rows (a row cut short by `keep` is a pass of its own), or
+    /// one-way rows. Returns the passes and the CL points dropped.
+    #[allow(clippy::too_many_arguments)]
+    fn raster(
+        &self,
+        hf: &HeightField,
+        tool: &Tool,
+        region: [f64; 4],
+        floor: f64,
+        step: f64,
+        keep: Option<&(dyn Fn(f64, f64) -> bool + Sync)>,
+    ) -> (Vec<Vec<DVec3>>, usize) {
+        let [x0, y0, x1, y1] = region;
+        let rows: Vec<Vec<(f64, f64)>> = raster::rows(x1 - x0, y1 - y0, self.angle, step, hf.pitch)
+            .into_iter()
+            .map(|r| r.into_iter().map(|(x, y)| (x + x0, y + y0)).collect())
+            .collect();
+        let tol = self.tolerance;
+        let climb = self.direction == Some(Direction::Climb);
+        // runs of whole rows; pieces of cut rows alone
+        // (whole rows?, rows)
+        type Group = (bool, Vec<Vec<(f64, f64)>>);
+        let mut groups: Vec<Group> = Vec::new();
+        for (k, row) in rows.into_iter().enumerate() {
+            let pieces = match keep {
+                None => vec![row.clone()],
+                Some(f) => row
+                    .split(|&(x, y)| !f(x, y))
+                    .filter(|p| p.len() > 1)
+                    .map(|p| p.to_vec())
+                    .collect(),
+            };
+            if pieces.len() == 1 && pieces[0].len() == row.len() {
+                match groups.last_mut() {
+                    Some((true, g)) => g.push(row),
+                    _ => groups.push((true, vec![row])),
+                }
+            } else {
+                for mut p in pieces {
+                    if k % 2 == 1 {
+                        p.reverse();
+                    }
+                    groups.push((false, vec![p]));
+                }
+            }
+        }
+        let mut out = Vec::new();
+        let mut raw = 0;
+        for (whole, g) in groups {
+            let cl = raster::drop_rows(hf, tool, &g, floor);
+            raw += cl.iter().map(Vec::len).sum::<usize>();
+            let main = match (self.direction, whole) {
+                (None, true) => vec![raster::zigzag(hf, tool, &cl, floor, tol)],
+                (None, false) => cl.iter().map(|c| path::merge(c, tol)).collect(),
+                (Some(_), _) => raster::one_way(&cl, climb, tol),
+            };
+            out.extend(
+                main.iter()
+                    .map(|c| path::check_and_refine(hf, tool, c, floor, tol)),
+            );
+        }
+        (out, raw)
+    }
+
+    /// Feeds and speeds for `tool`: flags, else the material's entry for
+    /// its diameter, else generic values; defaults are capped at the
+    /// machine's limits (and `notes` says so), flags beyond them refused.
+    fn settings(
+        &self,
+        m: &Machine,
+        tool: &Tool,
+        material: Option<&crate::materials::Material>,
+        notes: &mut Vec<String>,
+    ) -> Result<Settings> {
+        let c = material.and_then(|mt| mt.cutting_for(tool.working_diameter()));
+        let rate = m.max_rate.x.min(m.max_rate.y);
+        let mut cap = |what: &str, v: f64, lo: f64, hi: f64, unit: &str| {
+            let capped = v.clamp(lo, hi);
+            if capped != v {
+                let n = format!(
+                    "{what} {v} {unit} for {} with {} capped at {}'s {capped} {unit}",
+                    self.material.as_deref().unwrap_or("generic cutting"),
+                    tool.spec(),
+                    m.name
+                );
+                if !notes.contains(&n) {
+                    notes.push(n);
+                }
+            }
+            capped
+        };
+        let s = Settings {
+            feed: match self.feed {
+                Some(f) => f,
+                None => cap(
+                    "feed",
+                    c.as_ref().map_or(1000.0, |c| c.feed),
+                    0.0,
+                    rate,
+                    "mm/min",
+                ),
+            },
+            plunge_feed: match self.plunge_feed {
+                Some(f) => f,
+                None => cap(
+                    "plunge feed",
+                    c.as_ref().map_or(300.0, |c| c.plunge),
+                    0.0,
+                    m.max_rate.z,
+                    "mm/min",
+                ),
+            },
+            rpm: match self.rpm {
+                Some(r) => r,
+                None => cap(
+                    "spindle speed",
+                    c.as_ref().map_or(18000.0, |c| c.rpm),
+                    m.spindle.min,
+                    m.spindle.max,
+                    "rpm",
+                ),
+            },
+            safe_z: self.safe_z,
+            dwell: 2.0,
+        };
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !(positive(s.safe_z) && positive(s.feed) && positive(s.plunge_feed) && s.rpm >= 0.0) {
+            bail!("--safe-z, --feed and --plunge-feed must be positive and --rpm >= 0");
+        }
+        if s.feed > rate || s.plunge_feed > m.max_rate.z {
+            bail!(
+                "feed {} / plunge {} mm/min exceed {}'s limits ({rate} XY, {} Z)",
+                s.feed,
+                s.plunge_feed,
+                m.name,
+                m.max_rate.z
+            );
+        }
+        if s.rpm < m.spindle.min || s.rpm > m.spindle.max {
+            bail!(
+                "--rpm {}: outside {}'s spindle range {}..{}",
+                s.rpm,
+                m.name,
+                m.spindle.min,
+                m.spindle.max
+            );
+        }
+        Ok(s)
+    }
+
+    /// Waterline passes `dz` apart, level by level from the top, nearest
+    /// first.
+    #[allow(clippy::too_many_arguments)]
+    fn waterlines(
+        &self,
+        hf: &HeightField,
+        tool: &Tool,
+        relief: &Relief,
+        floor: f64,
+        dz: f64,
+        climb: bool,
+        keep_also: Option<&(dyn Fn(f64, f64) -> bool + Sync)>,
+    ) -> Vec<Vec<DVec3>> {
+        let g = waterline::ClGrid::new(hf, tool, relief.width_mm, relief.height_mm, floor);
+        let mut out: Vec<Vec<DVec3>> = Vec::new();
+        let steep_only = self.finish == Finish::RasterWaterline;
+        for level in waterline::levels(&g, dz) {
+            let (w, h) = (relief.width_mm, relief.height_mm);
+            let keep = |p: DVec3, slope: f64| {
+                (0.0..=w).contains(&p.x)
+                    && (0.0..=h).contains(&p.y)
+                    && (!steep_only || slope >= waterline::GENTLEST)
+                    && keep_also.is_none_or(|f| f(p.x, p.y))
+            };
+            let cs: Vec<waterline::Contour> = waterline::contours(&g, hf, tool, level)
+                .iter()
+                .flat_map(|c| waterline::parts(c, keep))
+                .collect();
+            let mut loops: Vec<(bool, Vec<DVec3>)> = cs
+                .iter()
+                .map(|c| {
+                    let c = waterline::refine(hf, tool, floor, c);
+                    let mut pts = waterline::simplify(&c, self.tolerance);
+                    if climb {
+                        pts.reverse();
+                    }
+                    (c.closed, waterline::clear(hf, tool, &pts))
+                })
+                .collect();
+            // nearest next: closed loops start where they are nearest
+            let mut at = out
+                .last()
+                .and_then(|p| p.last().copied())
+                .unwrap_or_default();
+            while !loops.is_empty() {
+                let d = |p: &DVec3| (*p - at).truncate().length_squared();
+                let (k, start) = loops
+                    .iter()
+                    .enumerate()
+                    .map(|(k, (closed, pts))| {
+                        let s = if *closed {
+                            (0..pts.len() - 1)
+                                .min_by(|&a, &b| d(&pts[a]).total_cmp(&d(&pts[b])))
+                                .unwrap_or(0)
+                        } else {
+                            0
+                        };
+                        (k, s, d(&pts[s]))
+                    })
+                    .min_by(|a, b| a.2.total_cmp(&b.2))
+                    .map(|(k, s, _)| (k, s))
+                    .unwrap();
+                let (closed, mut pts) = loops.swap_remove(k);
+                if closed && start > 0 {
+                    pts.pop();
+                    pts.rotate_left(start);
+                    pts.push(pts[0]);
+                }
+                at = *pts.last().unwrap();
+                out.push(pts);
+            }
+        }
+        out
+    }
+
+    /// One G-code file for `ops`, tool changes between them.
+    #[allow(clippy::too_many_arguments)]
+    fn emit(
+        &self,
+        ops: &[&Op],
+        relief: &Relief,
+        plan: &layout::Plan,
+        m: &Machine,
+        z_shift: f64,
+        zero: &str,
+        notes: &[String],
+    ) -> String {
+        let header = |op: &Op| {
+            vec![
+                format!(
+                    "tool: {} (radius {} mm) for {}",
+                    op.tool.spec(),
+                    op.tool.radius(),
+                    op.title
+                ),
+                format!("strategy: {}", op.strategy),
+                format!(
+                    "feed {} plunge {} mm/min, {} rpm, safe Z {}",
+                    op.settings.feed, op.settings.plunge_feed, op.settings.rpm, op.settings.safe_z
+                ),
+            ]
+        };
+        let (sw, sh, st) = plan.stock;
+        let mut top = vec![
+            "relievo GRBL 1.1 job".to_string(),
+            format!("relief: {}", self.relief_name),
+            format!(
+                "material: {}",
+                self.material.as_deref().unwrap_or("not given")
+            ),
+            format!(
+                "panel: {:.2} x {:.2} mm, relief depth {:.3} mm{}",
+                relief.width_mm,
+                relief.height_mm,
+                relief.depth_mm,
+                if self.layout.rotate {
+                    ", turned 90 deg"
+                } else {
+                    ""
+                }
+            ),
+            format!(
+                "stock: {sw:.2} x {sh:.2} x {st:.2} mm, origin at its {}",
+                if self.origin == Origin::Center {
+                    "centre"
+                } else {
+                    "lower-left corner"
+                }
+            ),
+            match self.z_zero {
+                ZZero::Top => "Z0 = stock top".to_string(),
+                ZZero::Bottom => format!("Z0 = stock bottom (spoilboard), stock top at Z{st}"),
+            },
+            // machine-readable: the simulator places the relief by it
+            plan.frame_comment(z_shift),
+            format!(
+                "machine: {}, units: {}",
+                m.name,
+                if self.units == Units::In {
+                    "inch (G20)"
+                } else {
+                    "mm"
+                }
+            ),
+        ];
+        top.extend(notes.iter().cloned());
+        top.extend(header(ops[0]));
+        let inch = self.units == Units::In;
+        let mut e = Emitter::new(&top, &ops[0].settings, inch, z_shift);
+        let shift = plan.shift;
+        for (k, op) in ops.iter().enumerate() {
+            if k > 0 && op.tool != ops[k - 1].tool {
+                e.tool_change(&header(op), &op.settings, zero);
+            } else if k > 0 {
+                for h in header(op).iter().skip(1) {
+                    crate::gcode::emit::comment(&mut e.out, h);
+                }
+            }
+            for pass in &op.passes {
+                // on the G-code grid: XY as dropped, Z rounded up
+                let pts: Vec<DVec3> = pass
+                    .pts
+                    .iter()
+                    .map(|p| {
+                        DVec3::new(
+                            path::snap(p.x + shift.x),
+                            path::snap(p.y + shift.y),
+                            path::snap_up(p.z),
+                        )
+                    })
+                    .collect();
+                e.pass(&pts, &op.settings, pass.clear_z);
+            }
+        }
+        e.finish(&ops[ops.len() - 1].settings)
+    }
+}
+
+/// Insert comment lines after the header comments.
+fn with_comments(mut text: String, lines: &[String]) -> String {
+    let mut add = String::new();
+    for l in lines {
+        crate::gcode::emit::comment(&mut add, l);
+    }
+    let at = text
+        .lines()
+        .take_while(|l| l.starts_with('('))
+        .map(|l| l.len() + 1)
+        .sum();
+    text.insert_str(at, &add);
+    text
+}
+
+/// Where `path` is the job, the roughing file beside it.
+pub fn rough_path(path: &Path) -> PathBuf {
+    path.with_file_name(format!(
+        "{}-rough.nc",
+        path.file_stem()
+            .map_or("job".into(), |s| s.to_string_lossy())
+    ))
+}

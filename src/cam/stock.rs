@@ -1,0 +1,170 @@
+//! The stock as the job plans it: a heightfield on the relief's samples
+//! (0 = stock top), cut pass by pass as operations are planned, so that
+//! later operations know where material is left: where to step down, and
+//! from how high each pass must ramp in instead of plunging.
+
+use crate::gcode::{Kind, Segment};
+use crate::grid::Grid;
+use crate::sim::{self, Stock};
+use crate::tool::Tool;
+use crate::toolpath::dropcutter::HeightField;
+use crate::toolpath::{path, Pass};
+use glam::DVec3;
+
+pub struct Planned {
+    pub stock: Stock,
+    pub top: Grid<f32>,
+}
+
+impl Planned {
+    /// Untouched stock (in panel coordinates).
+    pub fn new(stock: Stock) -> Planned {
+        let (cw, ch) = stock.cells();
+        Planned {
+            stock,
+            top: Grid::new(cw, ch, 0.0),
+        }
+    }
+
+    /// The highest material within `r` of (x, y) (stock top outside).
+    pub fn highest(&self, x: f64, y: f64, r: f64) -> f64 {
+        let s = &self.stock;
+        let (w, h) = (self.top.w, self.top.h);
+        let top = s.y0 + s.height;
+        let none = f64::NEG_INFINITY;
+        let Some((i0, i1)) = crate::sweep::cells_between(x - r - s.x0, x + r - s.x0, s.pitch, w)
+        else {
+            return none;
+        };
+        let Some((j0, j1)) = crate::sweep::cells_between(top - y - r, top - y + r, s.pitch, h)
+        else {
+            return none;
+        };
+        let mut m = f32::NEG_INFINITY;
+        for j in j0..=j1 {
+            let (_, cy) = s.centre(0, j);
+            for i in i0..=i1 {
+                let (cx, _) = s.centre(i, 0);
+                if (cx - x).powi(2) + (cy - y).powi(2) <= r * r {
+                    m = m.max(*self.top.get(i, j));
+                }
+            }
+        }
+        m as f64
+    }
+
+    /// The thickest material the tool at tip (x, y, z) would cut: over the
+    /// cells under it, how far the stock stands above its surface.
+    pub fn would_cut(&self, x: f64, y: f64, z: f64, tool: &Tool) -> f64 {
+        let s = &self.stock;
+        let r = tool.radius();
+        let (w, h) = (self.top.w, self.top.h);
+        let top = s.y0 + s.height;
+        let (Some((i0, i1)), Some((j0, j1))) = (
+            crate::sweep::cells_between(x - r - s.x0, x + r - s.x0, s.pitch, w),
+            crate::sweep::cells_between(top - y - r, top - y + r, s.pitch, h),
+        ) else {
+            return 0.0;
+        };
+        let mut most = 0.0f64;
+        for j in j0..=j1 {
+            let (_, cy) = s.centre(0, j);
+            for i in i0..=i1 {
+                let (cx, _) = s.centre(i, 0);
+                let d = ((cx - x).powi(2) + (cy - y).powi(2)).sqrt();
+                if d <= r {
+                    most = most.max(*self.top.get(i, j) as f64 - (z + tool.profile(d)));
+                }
+            }
+        }
+        most
+    }
+
+    /// Cut one pass into the stock.
+    pub fn cut(&mut self, pts: &[DVec3], tool: Tool) {
+        let segs: Vec<Segment> = pts
+            .windows(2)
+            .map(|w| Segment {
+                line: 0,
+                kind: Kind::Feed,
+                a: w[0],
+                b: w[1],
+                feed: 1.0,
+                stop_before: false,
+            })
+            .collect();
+        sim::cut(&self.stock, &mut self.top, &segs, tool);
+    }
+
+    /// Each pass in order: split where it would drop steeply into
+    /// material (the rest becomes a pass of its own), ramped in from the
+    /// material's top wherever it starts in material, and cut into the
+    /// stock, so that no move plunges.
+    pub fn ramp_and_cut(&mut self, passes: Vec<Pass>, tool: Tool) -> Vec<Pass> {
+        let r = tool.radius();
+        let mut out = Vec::with_capacity(passes.len());
+        for p in passes {
+            let mut from = 0;
+            let clear_z = p.clear_z;
+            while from < p.pts.len() {
+                let split = self.steep_drop(&p.pts[from..], r).map(|i| from + i);
+                let to = split.unwrap_or(p.pts.len());
+                let mut piece = p.pts[from..to].to_vec();
+                let first = piece[0];
+                if self.would_cut(first.x, first.y, first.z, &tool) > 0.005 {
+                    let top = self.highest(first.x, first.y, r);
+                    // start a hair above the material
+                    let start = path::snap_up(top + 0.05).min(clear_z.max(top + 0.05));
+                    piece = path::ramp(&piece, start, r);
+                }
+                self.cut(&piece, tool);
+                out.push(Pass {
+                    pts: piece,
+                    clear_z,
+                });
+                // the rest of the pass starts from the pass's own
+                // clearance height, which clears everything
+                from = to;
+            }
+        }
+        out
+    }
+
+    /// The first point of `pts` reached by a drop steeper than 45 degrees
+    /// that ends in material (more than a scallop under the tool's axis).
+    fn steep_drop(&self, pts: &[DVec3], r: f64) -> Option<usize> {
+        (1..pts.len()).find(|&i| {
+            let (a, b) = (pts[i - 1], pts[i]);
+            let drop = a.z - b.z;
+            drop > 0.05
+                && drop > (b - a).truncate().length()
+                && self.highest(b.x, b.y, r / 4.0) - b.z > crate::sim::engage::PLUNGE_SKIN as f64
+        })
+    }
+
+    /// Thickest material left above the CL surface of `tool` over the
+    /// region's sample points (x0, y0, x1, y1, panel mm) at which the tool
+    /// would meet it: what a finishing pass there would cut at once.
+    pub fn left_above(&self, hf: &HeightField, region: [f64; 4], tool: &Tool) -> f64 {
+        use rayon::prelude::*;
+        // a quarter radius apart: what is left lies in terraces and
+        // corners wider than that
+        let step = hf.pitch.max(tool.radius() / 4.0);
+        let nx = ((region[2] - region[0]) / step).ceil() as usize + 1;
+        let ny = ((region[3] - region[1]) / step).ceil() as usize + 1;
+        (0..ny)
+            .into_par_iter()
+            .map(|j| {
+                let y = (region[1] + j as f64 * step).min(region[3]);
+                let mut most = 0.0f64;
+                for i in 0..nx {
+                    let x = (region[0] + i as f64 * step).min(region[2]);
+                    if let Some(z) = hf.drop(tool, x, y) {
+                        most = most.max(self.would_cut(x, y, z, tool));
+                    }
+                }
+                most
+            })
+            .reduce(|| 0.0, f64::max)
+    }
+}
