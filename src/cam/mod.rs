@@ -603,12 +603,13 @@ impl ToolpathJob {
         for ((file, text), prog) in texts.into_iter().zip(&progs) {
             let secs = sim::estimate_time(prog, &m);
             time_s += secs;
-            lines += text.lines().count() + extra.len() + 1;
             let mut text = with_comments(text, &extra);
             text = with_comments(
                 text,
                 &[format!("estimated time: {} on {}", sim::hms(secs), m.name)],
             );
+            // counted as written: a wrapped comment takes several lines
+            lines += text.lines().count();
             out.add(&file, text.into_bytes());
             written.push(file);
         }
@@ -715,11 +716,7 @@ impl ToolpathJob {
         step: f64,
         keep: Option<&(dyn Fn(f64, f64) -> bool + Sync)>,
     ) -> (Vec<Vec<DVec3>>, usize) {
-        let [x0, y0, x1, y1] = region;
-        let rows: Vec<Vec<(f64, f64)>> = raster::rows(x1 - x0, y1 - y0, self.angle, step, hf.pitch)
-            .into_iter()
-            .map(|r| r.into_iter().map(|(x, y)| (x + x0, y + y0)).collect())
-            .collect();
+        let rows = raster::rows_in(region, self.angle, step, hf.pitch);
         let tol = self.tolerance;
         let climb = self.direction == Some(Direction::Climb);
         // runs of whole rows; pieces of cut rows alone

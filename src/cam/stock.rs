@@ -26,58 +26,48 @@ impl Planned {
         }
     }
 
-    /// The highest material within `r` of (x, y) (stock top outside).
-    pub fn highest(&self, x: f64, y: f64, r: f64) -> f64 {
+    /// Fold `f(acc, height, distance)` over the stock cells within `r`
+    /// of (x, y), starting from `init`.
+    fn fold_footprint(
+        &self,
+        (x, y, r): (f64, f64, f64),
+        init: f64,
+        f: impl Fn(f64, f64, f64) -> f64,
+    ) -> f64 {
         let s = &self.stock;
-        let (w, h) = (self.top.w, self.top.h);
-        let top = s.y0 + s.height;
-        let none = f64::NEG_INFINITY;
-        let Some((i0, i1)) = crate::sweep::cells_between(x - r - s.x0, x + r - s.x0, s.pitch, w)
-        else {
-            return none;
-        };
-        let Some((j0, j1)) = crate::sweep::cells_between(top - y - r, top - y + r, s.pitch, h)
-        else {
-            return none;
-        };
-        let mut m = f32::NEG_INFINITY;
-        for j in j0..=j1 {
-            let (_, cy) = s.centre(0, j);
-            for i in i0..=i1 {
-                let (cx, _) = s.centre(i, 0);
-                if (cx - x).powi(2) + (cy - y).powi(2) <= r * r {
-                    m = m.max(*self.top.get(i, j));
-                }
-            }
-        }
-        m as f64
-    }
-
-    /// The thickest material the tool at tip (x, y, z) would cut: over the
-    /// cells under it, how far the stock stands above its surface.
-    pub fn would_cut(&self, x: f64, y: f64, z: f64, tool: &Tool) -> f64 {
-        let s = &self.stock;
-        let r = tool.radius();
         let (w, h) = (self.top.w, self.top.h);
         let top = s.y0 + s.height;
         let (Some((i0, i1)), Some((j0, j1))) = (
             crate::sweep::cells_between(x - r - s.x0, x + r - s.x0, s.pitch, w),
             crate::sweep::cells_between(top - y - r, top - y + r, s.pitch, h),
         ) else {
-            return 0.0;
+            return init;
         };
-        let mut most = 0.0f64;
+        let mut acc = init;
         for j in j0..=j1 {
             let (_, cy) = s.centre(0, j);
             for i in i0..=i1 {
                 let (cx, _) = s.centre(i, 0);
                 let d = ((cx - x).powi(2) + (cy - y).powi(2)).sqrt();
                 if d <= r {
-                    most = most.max(*self.top.get(i, j) as f64 - (z + tool.profile(d)));
+                    acc = f(acc, *self.top.get(i, j) as f64, d);
                 }
             }
         }
-        most
+        acc
+    }
+
+    /// The highest material within `r` of (x, y) (-inf off the stock).
+    pub fn highest(&self, x: f64, y: f64, r: f64) -> f64 {
+        self.fold_footprint((x, y, r), f64::NEG_INFINITY, |m, z, _| m.max(z))
+    }
+
+    /// The thickest material the tool at tip (x, y, z) would cut: over the
+    /// cells under it, how far the stock stands above its surface.
+    pub fn would_cut(&self, x: f64, y: f64, z: f64, tool: &Tool) -> f64 {
+        self.fold_footprint((x, y, tool.radius()), 0.0, |m, top, d| {
+            m.max(top - (z + tool.profile(d)))
+        })
     }
 
     /// Cut one pass into the stock.

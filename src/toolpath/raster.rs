@@ -29,6 +29,15 @@ pub fn rows(w: f64, h: f64, angle: f64, stepover: f64, step: f64) -> Vec<Vec<(f6
         .collect()
 }
 
+/// `rows` over the rectangle [x0, x1] x [y0, y1] of the panel.
+pub fn rows_in(region: [f64; 4], angle: f64, stepover: f64, step: f64) -> Vec<Vec<(f64, f64)>> {
+    let [x0, y0, x1, y1] = region;
+    rows(x1 - x0, y1 - y0, angle, stepover, step)
+        .into_iter()
+        .map(|r| r.into_iter().map(|(x, y)| (x + x0, y + y0)).collect())
+        .collect()
+}
+
 /// Cosine and sine of the rows' direction.
 fn frame(angle: f64) -> (f64, f64) {
     (angle.to_radians().cos(), angle.to_radians().sin())

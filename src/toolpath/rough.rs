@@ -64,12 +64,7 @@ pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
         }
     };
     // the offset CL surface along every row, once for all layers
-    let [x0, y0, x1, y1] = p.region;
-    let rows: Vec<Vec<(f64, f64)>> =
-        super::raster::rows(x1 - x0, y1 - y0, p.angle, p.stepover, hf.pitch)
-            .into_iter()
-            .map(|r| r.into_iter().map(|(x, y)| (x + x0, y + y0)).collect())
-            .collect();
+    let rows = super::raster::rows_in(p.region, p.angle, p.stepover, hf.pitch);
     let cl: Vec<Vec<DVec3>> = rows
         .par_iter()
         .map(|row| {
