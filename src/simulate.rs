@@ -2,6 +2,7 @@
 //! cut surface, a deviation map and a report out.
 
 use crate::bail;
+use crate::cam::layout::Frame;
 use crate::error::{Context, Result};
 use crate::gcode;
 use crate::grid::Grid;
@@ -15,21 +16,25 @@ use std::path::PathBuf;
 
 #[derive(Clone, Debug)]
 pub struct SimulateJob {
-    pub job: PathBuf,
+    /// The job's files, cut in turn into one stock (a split job: the
+    /// roughing file, then the finishing file).
+    pub jobs: Vec<PathBuf>,
     pub relief: PathBuf,
     /// For a plain heightmap without sidecar (also override it).
     pub relief_width: Option<f64>,
     pub relief_depth: Option<f64>,
     /// Tool spec; `None` = from the job's `(tool: SPEC)` comment.
     pub tool: Option<String>,
-    /// Stock width x height x thickness (mm); `None` = the relief's panel,
-    /// as thick as its depth plus 3 mm.
+    /// Stock width x height x thickness (mm); `None` = the stock the job's
+    /// `(frame: ...)` header states, else the relief's panel, as thick as
+    /// its depth plus 3 mm.
     pub stock: Option<(f64, f64, f64)>,
     /// Stock cells per relief pixel along each axis.
     pub oversample: usize,
     pub machine: String,
-    /// Job coordinates of the machine travel box's lower-left corner.
-    pub travel_origin: (f64, f64),
+    /// Job coordinates of the machine travel box's lower-left corner;
+    /// `None` = the stock's lower-left corner.
+    pub travel_origin: Option<(f64, f64)>,
     pub output: PathBuf,
     pub report: Option<PathBuf>,
     pub deviation: Option<PathBuf>,
@@ -38,7 +43,7 @@ pub struct SimulateJob {
 impl Default for SimulateJob {
     fn default() -> Self {
         SimulateJob {
-            job: PathBuf::new(),
+            jobs: Vec::new(),
             relief: PathBuf::new(),
             relief_width: None,
             relief_depth: None,
@@ -46,7 +51,7 @@ impl Default for SimulateJob {
             stock: None,
             oversample: 1,
             machine: "grbl-generic".into(),
-            travel_origin: (0.0, 0.0),
+            travel_origin: None,
             output: PathBuf::from("cut.png"),
             report: None,
             deviation: None,
@@ -56,6 +61,8 @@ impl Default for SimulateJob {
 
 pub struct SimSummary {
     pub report: Report,
+    /// The frame read from the job's header, if it had one.
+    pub frame: Option<Frame>,
     pub tool: Tool,
     pub cells: (usize, usize),
     pub timings: Timings,
@@ -100,47 +107,97 @@ impl SimulateJob {
             check_writable(o)?;
         }
         let machine = Machine::load(&self.machine)?;
-        let what = self.job.display().to_string();
-        let text = t.time("read job", || std::fs::read(&self.job)).ctx(&what)?;
-        let text = String::from_utf8(text)
-            .map_err(|_| crate::Error(format!("{what}: not a text file")))?;
-        let prog = t
-            .time("parse", || gcode::program(&text))
-            .map_err(|e| crate::Error(format!("{what}: {e}")))?;
+        if self.jobs.is_empty() {
+            bail!("simulate: no job given");
+        }
+        let mut progs = Vec::new();
+        let mut frame = None;
+        for job in &self.jobs {
+            let what = job.display().to_string();
+            let text = t.time("read job", || std::fs::read(job)).ctx(&what)?;
+            let text = String::from_utf8(text)
+                .map_err(|_| crate::Error(format!("{what}: not a text file")))?;
+            let f = Frame::find(&text).map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            match (frame, f) {
+                (None, f) => frame = f,
+                (Some(a), Some(b)) if a != b => {
+                    bail!(
+                        "{what}: its frame differs from the first job's: {}",
+                        b.comment()
+                    )
+                }
+                _ => {}
+            }
+            let prog = t
+                .time("parse", || gcode::program(&text))
+                .map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            progs.push((what, prog));
+        }
         let relief: Relief = t.time("load relief", || {
             file::load(&self.relief, self.relief_width, self.relief_depth)
         })?;
         let pitch = relief.pitch_mm() / self.oversample as f64;
-        let (sw, sh, st) =
-            self.stock
-                .unwrap_or((relief.width_mm, relief.height_mm, relief.depth_mm + 3.0));
+        // the stock and the relief where the job's header puts them
+        let (x0, y0, fw, fh, ft) = frame.map_or(
+            (
+                0.0,
+                0.0,
+                relief.width_mm,
+                relief.height_mm,
+                relief.depth_mm + 3.0,
+            ),
+            |f| f.stock,
+        );
+        let (sw, sh, st) = self.stock.unwrap_or((fw, fh, ft));
         if !(sw > 0.0 && sh > 0.0 && st > 0.0 && sw.is_finite() && sh.is_finite() && st.is_finite())
         {
             bail!("--stock {sw}x{sh}x{st}: sizes must be positive");
         }
+        let panel_at = frame.map_or((0.0, 0.0), |f| f.panel);
+        // Z0 on the stock's bottom: the stock top is at Z = T
+        let z_shift = frame.filter(|f| f.z_bottom).map_or(0.0, |f| f.stock.4);
         let stock = Stock {
-            x0: 0.0,
-            y0: 0.0,
+            x0,
+            y0,
             width: sw,
             height: sh,
             thickness: st,
             pitch,
-        };
+        }
+        // cells on the relief's samples, once per relief pixel or oversampled
+        .aligned_to(panel_at.0, panel_at.1 + relief.height_mm);
         let (w, h) = stock.cells();
         if w * h > 1 << 28 {
             bail!("--stock/--oversample: {w} x {h} cells is too many");
         }
         let mut cut = Grid::new(w, h, 0.0f32);
         let tool = self.tool.as_deref().map(Tool::parse).transpose()?;
-        let (rapids, moves, runs) = t
-            .time("cut", || {
-                sim::cut_program_measured(&stock, &mut cut, &prog, tool)
-            })
-            .map_err(|e| crate::Error(format!("{what}: {e}")))?;
-        let tool = runs[runs.len() - 1].2;
-        let engagement = sim::Engagement::measure(&prog, &moves, &runs, stock.pitch);
+        let mut engagement = sim::Engagement::default();
+        let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
+        let mut last_tool = None;
+        let travel_origin = self.travel_origin.unwrap_or((x0, y0));
+        for (what, job) in &progs {
+            let prog = job.lowered(z_shift);
+            let (r, moves, runs) = t
+                .time("cut", || {
+                    sim::cut_program_measured(&stock, &mut cut, &prog, tool)
+                })
+                .map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            last_tool = Some(runs[runs.len() - 1].2);
+            engagement.absorb(sim::Engagement::measure(&prog, &moves, &runs, stock.pitch));
+            // lines are numbered per file; a second file's follow on
+            rapids.extend(r.iter().map(|n| n + lines));
+            out_of_travel.extend(
+                sim::out_of_travel(job, &machine, travel_origin)
+                    .iter()
+                    .map(|n| n + lines),
+            );
+            time_s += t.time("time estimate", || sim::estimate_time(&prog, &machine));
+            lines += prog.lines;
+        }
+        let tool = last_tool.expect("at least one job");
         let (gouge, residual, mean, dev) = t.time("compare", || {
-            sim::deviation(&stock, &cut, &relief, (0.0, 0.0))
+            sim::deviation(&stock, &cut, &relief, panel_at)
         });
         let report = Report {
             max_gouge_mm: gouge,
@@ -148,11 +205,17 @@ impl SimulateJob {
             mean_residual_mm: mean,
             removed_mm3: sim::removed(&stock, &cut),
             rapids_in_stock: rapids,
-            out_of_travel: sim::out_of_travel(&prog, &machine, self.travel_origin),
-            time_s: t.time("time estimate", || sim::estimate_time(&prog, &machine)),
-            lines: prog.lines,
+            out_of_travel,
+            time_s,
+            lines,
             engagement,
+            frame: frame.map(|f| f.comment()),
         };
+        let what = progs
+            .iter()
+            .map(|p| p.0.as_str())
+            .collect::<Vec<_>>()
+            .join(" + ");
         let mut out = Outputs::default();
         t.time("encode", || {
             // the cut as a relief file: same depth scale as the target
@@ -160,13 +223,19 @@ impl SimulateJob {
             let heights = cut.map(|z| (*z as f64 + d).clamp(0.0, d) as f32);
             let as_relief = Relief {
                 heights,
-                width_mm: sw,
-                height_mm: sh,
+                width_mm: stock.width,
+                height_mm: stock.height,
                 depth_mm: d,
             };
+            // where the cut lies in job coordinates: its lower-left corner
             let (png, json) = file::encode_relief(
                 &as_relief,
-                serde_json::json!({"simulated": what, "tool": tool}),
+                serde_json::json!({
+                    "simulated": what,
+                    "tool": tool,
+                    "x0_mm": stock.x0,
+                    "y0_mm": stock.y0,
+                }),
             );
             out.add(&self.output, png);
             out.add(&file::sidecar_path(&self.output), json);
@@ -182,6 +251,7 @@ impl SimulateJob {
         t.time("write", || out.commit())?;
         Ok(SimSummary {
             report,
+            frame,
             tool,
             cells: (w, h),
             timings: t,

@@ -134,3 +134,230 @@ fn a_panel_that_fits_only_one_way_is_told_so() {
     ok(&base(&[]));
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// The touch-off pad's centre and side from a job header's
+/// `(touch-off pad: S mm square at Xx Yy, ...)` line.
+fn pad_of(job: &std::path::Path) -> (f64, f64, f64) {
+    let text = std::fs::read_to_string(job).unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("(touch-off pad:"))
+        .unwrap_or_else(|| panic!("{}: no pad line", job.display()));
+    let num = |after: &str| -> f64 {
+        let rest = &line[line.find(after).unwrap() + after.len()..];
+        let end = rest
+            .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-'))
+            .unwrap_or(rest.len());
+        rest[..end].parse().unwrap()
+    };
+    (num(" at X"), num(" Y"), num("pad: "))
+}
+
+/// A simulated cut (as a relief PNG: stock top = depth) with the job
+/// coordinates of each cell's centre.
+fn cut_cells(png: &std::path::Path) -> Vec<(f64, f64, f64)> {
+    let (w, h, v, _) = relief_mm(png);
+    let side = sidecar(png);
+    let p = side["width_mm"].as_f64().unwrap() / w as f64;
+    let x0 = side["params"]["x0_mm"].as_f64().unwrap();
+    let top = side["params"]["y0_mm"].as_f64().unwrap() + side["height_mm"].as_f64().unwrap();
+    (0..w * h)
+        .map(|k| {
+            let (i, j) = (k % w, k / w);
+            (x0 + (i as f64 + 0.5) * p, top - (j as f64 + 0.5) * p, v[k])
+        })
+        .collect()
+}
+
+/// Heights of the cells within `half` mm of (x, y).
+fn near(cells: &[(f64, f64, f64)], (x, y, half): (f64, f64, f64)) -> Vec<f64> {
+    cells
+        .iter()
+        .filter(|c| (c.0 - x).abs() <= half && (c.1 - y).abs() <= half)
+        .map(|c| c.2)
+        .collect()
+}
+
+/// Acceptance 3: roughing leaves the pad at the stock top, the finishing
+/// file cuts it; Z0 on the spoilboard cuts the same surface as Z0 on top.
+#[test]
+fn the_pad_stands_through_roughing_and_z0_bottom_cuts_the_same() {
+    let d = scratch("safe-pad");
+    let job = d.join("job.nc");
+    let rough = d.join("job-rough.nc");
+    let relief = d.join("job-relief.png");
+    let common = [
+        "carve",
+        "--resolution",
+        "150",
+        "--rough",
+        "T1",
+        "--stock",
+        "100x60x8",
+        "-q",
+    ];
+    let carve = |extra: &[&str]| {
+        let mut a = common.to_vec();
+        a.extend_from_slice(extra);
+        a.extend(["-o", job.to_str().unwrap()]);
+        ok(&run(&a));
+    };
+    carve(&["--split"]);
+    let (px, py, side) = pad_of(&rough);
+    let (_, _, _, depth) = relief_mm(&relief);
+    let pitch = 100.0 / 150.0;
+    let panel_h = sidecar(&relief)["height_mm"].as_f64().unwrap();
+    let cut = d.join("cut.png");
+    let rep = simulate_report(&rough, &relief, &cut, &[]);
+    assert!(rep["frame"].as_str().unwrap().contains("T8"), "{rep}");
+    let pad = near(&cut_cells(&cut), (px, py, side / 2.0 - pitch));
+    assert!(!pad.is_empty());
+    let lowest = pad.iter().cloned().fold(f64::INFINITY, f64::min);
+    eprintln!(
+        "pad {side} mm at X{px} Y{py}: {} cells, lowest {:.4} mm below the top after roughing",
+        pad.len(),
+        depth - lowest
+    );
+    assert!(lowest >= depth - 1e-4, "roughing cut the pad");
+    // roughing and finishing in turn: the pad cut down to the relief
+    let both = simulate_report(&rough, &relief, &cut, &[job.to_str().unwrap()]);
+    let top_cut = cut_cells(&cut);
+    let gouge = both["max_gouge_mm"].as_f64().unwrap();
+    let residual = both["max_residual_mm"].as_f64().unwrap();
+    // the relief under the pad, from the panel's place in the frame
+    let frame = both["frame"].as_str().unwrap().to_string();
+    let after = |key: &str| -> f64 {
+        let rest = &frame[frame.find(key).unwrap() + key.len()..];
+        rest.split([' ', ',']).next().unwrap().parse().unwrap()
+    };
+    let (ox, oy) = (after("panel X"), after("panel X0 Y"));
+    let (rw, rh, rv, _) = relief_mm(&relief);
+    let relief_cells: Vec<(f64, f64, f64)> = (0..rw * rh)
+        .map(|k| {
+            let (i, j) = (k % rw, k / rw);
+            let (x, y) = ((i as f64 + 0.5) * pitch, panel_h - (j as f64 + 0.5) * pitch);
+            (x + ox, y + oy, rv[k])
+        })
+        .collect();
+    // cell by cell over the pad: the cut at the relief within the
+    // residual, where roughing had left the stock top
+    let half = side / 2.0 - pitch;
+    let (mut n, mut worst, mut deepest) = (0, 0.0f64, 0.0f64);
+    for c in top_cut
+        .iter()
+        .filter(|c| (c.0 - px).abs() <= half && (c.1 - py).abs() <= half)
+    {
+        let r = relief_cells
+            .iter()
+            .find(|r| (r.0 - c.0).abs() < pitch / 2.0 && (r.1 - c.1).abs() < pitch / 2.0)
+            .unwrap();
+        worst = worst.max(c.2 - r.2);
+        deepest = deepest.max(depth - c.2);
+        n += 1;
+    }
+    eprintln!(
+        "rough + finish: gouge {gouge:.4} mm, residual max {residual:.4} mm; over the pad's \
+         {n} cells the cut lies up to {worst:.4} mm above the relief and up to {deepest:.3} mm \
+         below the stock top"
+    );
+    assert!(gouge < 0.001 && residual < 0.15, "{both}");
+    assert!(n > 50 && worst <= residual + 1e-6 && deepest > 0.3);
+
+    // Z0 on the spoilboard with roughing: no pad, no gouge
+    carve(&["--z-zero", "bottom"]);
+    let text = std::fs::read_to_string(&job).unwrap();
+    assert!(text.contains("Z0 bottom") && !text.contains("touch-off pad"));
+    let rep = simulate_report(&job, &relief, &cut, &[]);
+    assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001, "{rep}");
+    assert!(rep["max_residual_mm"].as_f64().unwrap() < 0.15, "{rep}");
+    // the same job zeroed on top and on the spoilboard cuts the same
+    // surface (a relief the finishing tool cuts in one pass: no pad)
+    let mut cuts = Vec::new();
+    for z0 in ["top", "bottom"] {
+        ok(&run(&[
+            "carve",
+            "--resolution",
+            "150",
+            "--depth",
+            "1.2",
+            "--stock",
+            "104x64x6",
+            "--z-zero",
+            z0,
+            "-o",
+            job.to_str().unwrap(),
+            "-q",
+        ]));
+        simulate_report(&job, &relief, &cut, &[]);
+        cuts.push(cut_cells(&cut));
+    }
+    let worst = cuts[0]
+        .iter()
+        .zip(&cuts[1])
+        .map(|(a, b)| (a.2 - b.2).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "Z0 bottom vs top: {} cells, largest difference {worst:.6} mm",
+        cuts[0].len()
+    );
+    assert!(worst < 0.001, "{worst}");
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// Acceptance 4: a G20 job cuts what the mm job cuts (within 1 um), and
+/// the simulated GRBL runs every line of it.
+#[test]
+fn an_inch_job_cuts_what_the_mm_job_cuts() {
+    use relievo::grbl::{job::SendJob, port::MemPort, sim::SimGrbl};
+    let d = scratch("safe-inch");
+    let (mm, inch) = (d.join("mm.nc"), d.join("in.nc"));
+    let relief = d.join("mm-relief.png");
+    for (job, units) in [(&mm, "mm"), (&inch, "in")] {
+        ok(&run(&[
+            "carve",
+            "--resolution",
+            "120",
+            "--units",
+            units,
+            "-o",
+            job.to_str().unwrap(),
+            "-q",
+        ]));
+    }
+    let text = std::fs::read_to_string(&inch).unwrap();
+    assert!(
+        text.contains("G20") && !text.contains("G21"),
+        "not a G20 job"
+    );
+    let cut = |job: &std::path::Path, name: &str| {
+        let png = d.join(name);
+        let rep = simulate_report(job, &relief, &png, &[]);
+        assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001, "{rep}");
+        relief_mm(&png).2
+    };
+    let (a, b) = (cut(&mm, "cut-mm.png"), cut(&inch, "cut-in.png"));
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "inch vs mm job: largest difference {worst:.6} mm over {} cells",
+        a.len()
+    );
+    assert!(worst < 0.001, "{worst}");
+    // GRBL's parser (the simulated machine's) takes every line
+    let machine = relievo::machine::Machine::load("grbl-generic").unwrap();
+    let mut port = MemPort::new(SimGrbl::new(&machine), 115200);
+    let send = SendJob {
+        job: inch.clone(),
+        rx_buffer: 128,
+        ..Default::default()
+    };
+    let (_, n) = send
+        .run(&mut port, &std::sync::atomic::AtomicBool::new(false))
+        .unwrap();
+    assert_eq!(port.sim.log.len(), n);
+    assert!(port.sim.log.iter().any(|l| l.starts_with("G20")));
+    std::fs::remove_dir_all(d).unwrap();
+}

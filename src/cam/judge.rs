@@ -24,13 +24,13 @@ pub struct Judged {
 
 /// The programs (in stock-top Z once `z_shift` is taken off) cut in turn.
 pub fn run(progs: &[Program], relief: &Relief, plan: &Plan, z_shift: f64) -> Result<Judged> {
-    let stock = plan.stock_in_job(relief.pitch_mm());
+    let stock = plan.stock_in_job(relief.pitch_mm(), relief.height_mm);
     let (w, h) = stock.cells();
     let mut cut = Grid::new(w, h, 0.0f32);
     let mut engagement = Engagement::default();
     let mut moves = Vec::new();
     for prog in progs {
-        let shifted = lowered(prog, z_shift);
+        let shifted = prog.lowered(z_shift);
         let (_, m, runs) = sim::cut_program_measured(&stock, &mut cut, &shifted, None)?;
         engagement.absorb(Engagement::measure(&shifted, &m, &runs, stock.pitch));
         moves.push((m, runs));
@@ -45,16 +45,6 @@ pub fn run(progs: &[Program], relief: &Relief, plan: &Plan, z_shift: f64) -> Res
         gouge,
         moves,
     })
-}
-
-/// A program's moves with every Z lowered by `dz`.
-pub fn lowered(prog: &Program, dz: f64) -> Program {
-    let mut p = prog.clone();
-    for s in &mut p.segments {
-        s.a.z -= dz;
-        s.b.z -= dz;
-    }
-    p
 }
 
 /// The first move over its tool's limits: (file index, what).

@@ -112,8 +112,9 @@ impl Layout {
 }
 
 impl Plan {
-    /// The stock in panel coordinates, sampled at `pitch`.
-    pub fn stock_in_panel(&self, pitch: f64) -> Stock {
+    /// The stock in panel coordinates, sampled at `pitch` on the relief's
+    /// grid (a panel `panel_h` mm tall).
+    pub fn stock_in_panel(&self, pitch: f64, panel_h: f64) -> Stock {
         Stock {
             x0: -self.panel_at.0,
             y0: -self.panel_at.1,
@@ -122,11 +123,12 @@ impl Plan {
             thickness: self.stock.2,
             pitch,
         }
+        .aligned_to(0.0, panel_h)
     }
 
     /// The stock in job coordinates.
-    pub fn stock_in_job(&self, pitch: f64) -> Stock {
-        let s = self.stock_in_panel(pitch);
+    pub fn stock_in_job(&self, pitch: f64, panel_h: f64) -> Stock {
+        let s = self.stock_in_panel(pitch, panel_h);
         Stock {
             x0: s.x0 + self.shift.x,
             y0: s.y0 + self.shift.y,
@@ -134,20 +136,111 @@ impl Plan {
         }
     }
 
-    /// The header line the simulator reads to place stock and relief.
-    pub fn frame_comment(&self, z_shift: f64) -> String {
-        let s = self.stock_in_job(1.0);
+    /// Where the job puts stock and relief, as its header states it.
+    pub fn frame(&self, z_shift: f64) -> Frame {
+        Frame {
+            stock: (
+                self.shift.x - self.panel_at.0,
+                self.shift.y - self.panel_at.1,
+                self.stock.0,
+                self.stock.1,
+                self.stock.2,
+            ),
+            panel: (self.shift.x, self.shift.y),
+            z_bottom: z_shift > 0.0,
+        }
+    }
+}
+
+/// The job's frame: the stock (lower-left corner and size, job
+/// coordinates), the relief panel's lower-left corner, and whether Z0 is
+/// the stock's bottom. Written into every job's header so that
+/// `simulate` places stock and relief as the job meant them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    /// X, Y, width, height, thickness, mm.
+    pub stock: (f64, f64, f64, f64, f64),
+    pub panel: (f64, f64),
+    pub z_bottom: bool,
+}
+
+impl Frame {
+    /// The header comment (without parentheses).
+    pub fn comment(&self) -> String {
+        let n = crate::gcode::emit::num;
+        let (x, y, w, h, t) = self.stock;
         format!(
             "frame: stock X{} Y{} W{} H{} T{}, panel X{} Y{}, Z0 {}",
-            crate::gcode::emit::num(s.x0),
-            crate::gcode::emit::num(s.y0),
-            crate::gcode::emit::num(s.width),
-            crate::gcode::emit::num(s.height),
-            crate::gcode::emit::num(s.thickness),
-            crate::gcode::emit::num(self.shift.x),
-            crate::gcode::emit::num(self.shift.y),
-            if z_shift > 0.0 { "bottom" } else { "top" }
+            n(x),
+            n(y),
+            n(w),
+            n(h),
+            n(t),
+            n(self.panel.0),
+            n(self.panel.1),
+            if self.z_bottom { "bottom" } else { "top" }
         )
+    }
+
+    /// The frame stated in a job's header comments, if any (in mm, as
+    /// written by `comment`). A malformed frame line is an error.
+    pub fn find(text: &str) -> Result<Option<Frame>> {
+        let Some((n, line)) = text
+            .lines()
+            .enumerate()
+            .take_while(|(_, l)| l.trim_start().starts_with('(') || l.trim().is_empty())
+            .find(|(_, l)| l.trim_start().starts_with("(frame:"))
+        else {
+            return Ok(None);
+        };
+        let bad = || crate::Error(format!("line {}: malformed frame comment: {line}", n + 1));
+        let body = line
+            .trim()
+            .strip_prefix("(frame:")
+            .and_then(|b| b.strip_suffix(')'))
+            .ok_or_else(bad)?;
+        let mut v = std::collections::HashMap::new();
+        let mut z_bottom = None;
+        for part in body.split(',') {
+            let words: Vec<&str> = part.split_whitespace().collect();
+            match words.split_first() {
+                Some((&"Z0", [at])) => {
+                    z_bottom = Some(match *at {
+                        "top" => false,
+                        "bottom" => true,
+                        _ => return Err(bad()),
+                    })
+                }
+                Some((&what, rest)) => {
+                    for w in rest {
+                        let (c, num) = w.split_at(1);
+                        let x: f64 = num.parse().map_err(|_| bad())?;
+                        if !x.is_finite() {
+                            return Err(bad());
+                        }
+                        v.insert(format!("{what}{c}"), x);
+                    }
+                }
+                None => return Err(bad()),
+            }
+        }
+        let g = |k: &str| v.get(k).copied().ok_or_else(bad);
+        let f = Frame {
+            stock: (
+                g("stockX")?,
+                g("stockY")?,
+                g("stockW")?,
+                g("stockH")?,
+                g("stockT")?,
+            ),
+            panel: (g("panelX")?, g("panelY")?),
+            z_bottom: z_bottom.ok_or_else(bad)?,
+        };
+        let (_, _, w, h, t) = f.stock;
+        if !(w > 0.0 && h > 0.0 && t > 0.0) {
+            return Err(bad());
+        }
+        Ok(Some(f))
     }
 }
 
@@ -223,6 +316,22 @@ pub fn raise(z: &mut Grid<f64>, r: &Relief, pad: (f64, f64, f64), value: f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_frame_reads_back_as_written() {
+        let f = Frame {
+            stock: (-10.0, -5.5, 120.0, 80.25, 12.0),
+            panel: (-5.0, 0.5),
+            z_bottom: true,
+        };
+        let text = format!("(relievo)\n({})\nG21\n", f.comment());
+        assert_eq!(Frame::find(&text).unwrap(), Some(f));
+        assert_eq!(
+            Frame::find("(no frame)\nG21\n(frame: later)\n").unwrap(),
+            None
+        );
+        assert!(Frame::find("(frame: stock X1 Y2, Z0 top)\n").is_err());
+    }
 
     #[test]
     fn a_quarter_turn_moves_the_upper_left_corner_to_the_upper_right() {

@@ -252,6 +252,12 @@ impl ToolpathJob {
         if !(self.tolerance > 0.0 && self.tolerance <= 1.0) {
             bail!("--tolerance {}: must be in (0, 1] mm", self.tolerance);
         }
+        if self.z_zero == ZZero::Bottom && self.layout.stock.is_none() {
+            bail!(
+                "--z-zero bottom: the job needs the stock's thickness to reach its top; \
+                 give it with --stock WxHxT"
+            );
+        }
         let m = Machine::load(&self.machine)?;
         let material = self
             .material
@@ -295,7 +301,7 @@ impl ToolpathJob {
         let floor = -relief.depth_mm;
         let (pw, ph) = (relief.width_mm, relief.height_mm);
         let panel = [0.0, 0.0, pw, ph];
-        let mut planned = stock::Planned::new(plan.stock_in_panel(relief.pitch_mm()));
+        let mut planned = stock::Planned::new(plan.stock_in_panel(relief.pitch_mm(), ph));
         let mut ops: Vec<Op> = Vec::new();
         let mut raw_points = 0;
         // roughing: asked for, or added when the finishing tool may not
@@ -388,7 +394,7 @@ impl ToolpathJob {
             let passes = t.time("roughing", || rough::passes(hf_main, floor, &params))?;
             raw_points += passes.iter().map(|p| p.pts.len()).sum::<usize>();
             let passes = t.time("roughing check", || self.checked(hf_main, &rt, passes));
-            let passes = t.time("stock", || planned.ramp_and_cut(passes, rt));
+            let passes = t.time("stock", || planned.ramp_and_cut(passes, rt, false));
             ops.push(Op {
                 title: "roughing",
                 tool: rt,
@@ -414,7 +420,7 @@ impl ToolpathJob {
                 op.1
             ));
             raw_points += op.0.iter().map(|p| p.pts.len()).sum::<usize>();
-            let passes = planned.ramp_and_cut(op.0, tool);
+            let passes = planned.ramp_and_cut(op.0, tool, false);
             ops.push(Op {
                 title: "finishing-tool layers",
                 tool,
@@ -479,12 +485,12 @@ impl ToolpathJob {
                 (p.1 + p.2 / 2.0 + r).min(ph),
             ];
             let mut pp = Vec::new();
-            let fin = t.time("stock", || planned.ramp_and_cut(passes, tool));
+            let fin = t.time("stock", || planned.ramp_and_cut(passes, tool, true));
             pp.extend(fin);
             if let Some(op) =
                 self.rest_layers(&hf, &tool, &planned, win, floor, fd, &finish_settings)
             {
-                pp.extend(planned.ramp_and_cut(op.0, tool));
+                pp.extend(planned.ramp_and_cut(op.0, tool, false));
             }
             let (surf, _) = self.raster(&hf, &tool, win, floor, step, None);
             pp.extend(
@@ -493,12 +499,13 @@ impl ToolpathJob {
                         .map(|pts| Pass { pts, clear_z: safe })
                         .collect(),
                     tool,
+                    true,
                 ),
             );
             what.push(format!("then the touch-off pad at X{:.1} Y{:.1}", p.0, p.1));
             passes = pp;
         } else {
-            passes = t.time("stock", || planned.ramp_and_cut(passes, tool));
+            passes = t.time("stock", || planned.ramp_and_cut(passes, tool, true));
         }
         ops.push(Op {
             title: "finishing",
@@ -984,7 +991,7 @@ impl ToolpathJob {
                 ZZero::Bottom => format!("Z0 = stock bottom (spoilboard), stock top at Z{st}"),
             },
             // machine-readable: the simulator places the relief by it
-            plan.frame_comment(z_shift),
+            plan.frame(z_shift).comment(),
             format!(
                 "machine: {}, units: {}",
                 m.name,

@@ -89,8 +89,10 @@ impl Planned {
     /// Each pass in order: split where it would drop steeply into
     /// material (the rest becomes a pass of its own), ramped in from the
     /// material's top wherever it starts in material, and cut into the
-    /// stock, so that no move plunges.
-    pub fn ramp_and_cut(&mut self, passes: Vec<Pass>, tool: Tool) -> Vec<Pass> {
+    /// stock, so that no move plunges. A sliver between two steep drops
+    /// too short to ramp along is left out of clearing passes (`surface`
+    /// false: later passes take its material) and kept in surface passes.
+    pub fn ramp_and_cut(&mut self, passes: Vec<Pass>, tool: Tool, surface: bool) -> Vec<Pass> {
         let r = tool.radius();
         let mut out = Vec::with_capacity(passes.len());
         for p in passes {
@@ -106,6 +108,10 @@ impl Planned {
                     // start a hair above the material
                     let start = path::snap_up(top + 0.05).min(clear_z.max(top + 0.05));
                     piece = path::ramp(&piece, start, r);
+                    if piece[0].z < start - 1e-9 && !surface {
+                        from = to;
+                        continue;
+                    }
                 }
                 self.cut(&piece, tool);
                 out.push(Pass {

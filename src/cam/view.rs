@@ -39,8 +39,7 @@ fn ramp(t: f64) -> String {
 
 /// Top view of the job(s) as SVG, in mm with Y up.
 pub fn top_view(progs: &[Program], relief: &Relief, plan: &Plan, z_shift: f64) -> String {
-    let stock = plan.stock_in_job(1.0);
-    let (x0, y0, w, h) = (stock.x0, stock.y0, stock.width, stock.height);
+    let (x0, y0, w, h, _) = plan.frame(z_shift).stock;
     let pad = 6.0;
     let legend_h = 14.0;
     let deepest = progs

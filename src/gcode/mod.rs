@@ -44,6 +44,19 @@ pub struct Program {
     pub tools: Vec<(usize, String)>,
 }
 
+impl Program {
+    /// The moves with every Z lowered by `dz`: a job zeroed on the
+    /// stock's bottom, seen from its top.
+    pub fn lowered(&self, dz: f64) -> Program {
+        let mut p = self.clone();
+        for s in &mut p.segments {
+            s.a.z -= dz;
+            s.b.z -= dz;
+        }
+        p
+    }
+}
+
 /// Largest chord error when arcs are broken into straight moves (mm).
 pub const ARC_TOLERANCE: f64 = 1e-4;
 

@@ -49,6 +49,28 @@ impl Stock {
             (self.height / self.pitch).round().max(1.0) as usize,
         )
     }
+    /// The stock moved out (or in) by less than a cell on each side so
+    /// that its cells are centred on the samples of a relief whose left
+    /// edge is at `x` and top edge at `top`: the cut is then compared with
+    /// the relief's own samples, not with values interpolated between
+    /// them. An edge within a quarter cell of the grid snaps to it (sizes
+    /// in a job's header are rounded).
+    pub fn aligned_to(self, x: f64, top: f64) -> Stock {
+        let p = self.pitch;
+        let out = |d: f64| (d / p - 0.25).ceil() * p;
+        let x0 = x - out(x - self.x0);
+        let x1 = x + out(self.x0 + self.width - x);
+        let y1 = top + out(self.y0 + self.height - top);
+        let y0 = top - out(top - self.y0);
+        Stock {
+            x0,
+            y0,
+            width: x1 - x0,
+            height: y1 - y0,
+            ..self
+        }
+    }
+
     /// Centre of cell (i, j); row 0 is the top edge (largest Y).
     pub fn centre(&self, i: usize, j: usize) -> (f64, f64) {
         (
@@ -72,6 +94,9 @@ pub struct Report {
     /// Per tool: largest axial depth of cut, radial engagement and
     /// slotting depth, with their lines; plunges into material.
     pub engagement: Engagement,
+    /// The stock and relief placement read from the job's header.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frame: Option<String>,
 }
 
 impl Report {
@@ -597,6 +622,38 @@ pub fn removed(stock: &Stock, cut: &Grid<f32>) -> f64 {
 mod tests {
     use super::*;
     use crate::gcode::program;
+
+    #[test]
+    fn an_aligned_stock_puts_cell_centres_on_the_relief_samples() {
+        let s = Stock {
+            x0: -0.3,
+            y0: -1.1,
+            width: 10.5,
+            height: 8.2,
+            thickness: 3.0,
+            pitch: 0.5,
+        }
+        .aligned_to(0.0, 6.0);
+        // covers the stock, by less than a cell more on each side (an
+        // edge within a quarter cell of the grid snaps to it)
+        assert!(s.x0 <= -0.3 && s.x0 > -0.8 && s.x0 + s.width >= 10.2 - 0.125);
+        assert!(s.y0 <= -1.1 + 0.125 && s.y0 + s.height >= 7.1 - 0.125 && s.y0 + s.height < 7.6);
+        let snapped = Stock {
+            x0: -1.00004,
+            width: 3.00009,
+            ..s
+        }
+        .aligned_to(0.0, 6.0);
+        assert!((snapped.x0 + 1.0).abs() < 1e-9 && (snapped.width - 3.0).abs() < 1e-9);
+        let (w, h) = s.cells();
+        assert_eq!((w as f64 * 0.5, h as f64 * 0.5), (s.width, s.height));
+        // a cell centre is a relief sample centre: (i + 0.5) * 0.5 from 0
+        for (i, j) in [(0, 0), (3, 5), (w - 1, h - 1)] {
+            let (cx, cy) = s.centre(i, j);
+            let (u, v) = (cx / 0.5 - 0.5, (6.0 - cy) / 0.5 - 0.5);
+            assert!((u - u.round()).abs() < 1e-9 && (v - v.round()).abs() < 1e-9);
+        }
+    }
 
     fn stock(size: f64, pitch: f64) -> (Stock, Grid<f32>) {
         let s = Stock {

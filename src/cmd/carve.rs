@@ -1,0 +1,53 @@
+//! `relievo carve`: relief and job in one call, all or nothing.
+
+use super::relief::ReliefOpts;
+use super::toolpath::{report, CutOpts};
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct CarveArgs {
+    /// Model as for `relief`; without it, the demo scene.
+    pub model: Option<PathBuf>,
+    /// Output G-code job; the relief is written beside it as NAME-relief.png.
+    #[arg(short, long, default_value = "job.nc")]
+    pub output: PathBuf,
+    #[command(flatten)]
+    pub relief: ReliefOpts,
+    #[command(flatten)]
+    pub cut: CutOpts,
+}
+
+/// `relievo carve`.
+pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
+    let stem = args
+        .output
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or("job".into());
+    let relief_path = args.output.with_file_name(format!("{stem}-relief.png"));
+    let material = args.relief.material.clone();
+    let rjob = args.relief.job(args.model, relief_path.clone());
+    let cam = args.cut.job(
+        args.output.clone(),
+        relief_path.display().to_string(),
+        material,
+    );
+    relievo::output::check_writable(&args.output)?;
+    let r = rjob.run(&mut |_| {})?;
+    let s = match cam.run(&r.relief) {
+        Ok(s) => s,
+        Err(e) => {
+            // all or nothing: no relief without its job
+            for p in &r.written {
+                let _ = std::fs::remove_file(p);
+            }
+            return Err(e);
+        }
+    };
+    if !quiet {
+        eprintln!("relief -> {}", relief_path.display());
+    }
+    report(&s, quiet, verbose);
+    Ok(())
+}

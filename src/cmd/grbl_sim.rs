@@ -1,0 +1,112 @@
+//! `relievo grbl-sim`: a simulated GRBL 1.1 machine on a pseudo-terminal.
+
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct GrblSimArgs {
+    /// Machine profile for travel, rates and buffer size.
+    #[arg(long, default_value = "grbl-generic")]
+    pub machine: String,
+    /// Simulated motion runs this many times faster than real time.
+    #[arg(long, default_value_t = 1.0)]
+    pub speed: f64,
+    /// Append every executed line to this file.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Fault: reply error:CODE (default 20) to the Nth G-code line.
+    #[arg(long, value_name = "N[:CODE]")]
+    pub error_at: Option<String>,
+    /// Fault: raise ALARM:CODE (default 1) at the Nth G-code line.
+    #[arg(long, value_name = "N[:CODE]")]
+    pub alarm_at: Option<String>,
+    /// Fault: drop the link after this many bytes.
+    #[arg(long)]
+    pub disconnect_after: Option<usize>,
+    /// Fault: probability of noise bytes in a reply line.
+    #[arg(long, default_value_t = 0.0)]
+    pub garble: f64,
+}
+
+pub fn parse_fault(
+    s: &Option<String>,
+    default: u32,
+    what: &str,
+) -> relievo::Result<Option<(usize, u32)>> {
+    let Some(s) = s else { return Ok(None) };
+    let (n, c) = s.split_once(':').unwrap_or((s, ""));
+    let n = n
+        .parse()
+        .map_err(|_| relievo::Error(format!("{what} {s}: expected N[:CODE]")))?;
+    let c = if c.is_empty() {
+        default
+    } else {
+        c.parse()
+            .map_err(|_| relievo::Error(format!("{what} {s}: expected N[:CODE]")))?
+    };
+    Ok(Some((n, c)))
+}
+
+pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
+    use relievo::grbl::sim::{Faults, SimGrbl};
+    use std::io::{Read, Write};
+    let m = relievo::machine::Machine::load(&args.machine)?;
+    if !(args.speed.is_finite() && args.speed > 0.0) {
+        relievo::bail!("--speed {}: must be positive", args.speed);
+    }
+    let mut sim = SimGrbl::new(&m);
+    sim.faults = Faults {
+        error_at: parse_fault(&args.error_at, 20, "--error-at")?,
+        alarm_at: parse_fault(&args.alarm_at, 1, "--alarm-at")?,
+        disconnect_after: args.disconnect_after,
+        garble: args.garble,
+    };
+    let (mut master, slave) = serialport::TTYPort::pair()
+        .map_err(|e| relievo::Error(format!("grbl-sim: no pseudo-terminal: {e}")))?;
+    let name = serialport::SerialPort::name(&slave).unwrap_or_default();
+    println!("{name}");
+    std::io::stdout().flush().ok();
+    let mut log = match &args.log {
+        Some(p) => Some(
+            std::fs::File::create(p)
+                .map_err(|e| relievo::Error(format!("{}: {e}", p.display())))?,
+        ),
+        None => None,
+    };
+    let mut logged = 0;
+    serialport::SerialPort::set_timeout(&mut master, std::time::Duration::from_millis(2))
+        .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+    let start = std::time::Instant::now();
+    let mut buf = [0u8; 1024];
+    loop {
+        let n = match master.read(&mut buf) {
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => 0,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => 0,
+            Err(e) => relievo::bail!("grbl-sim: {e}"),
+        };
+        let t = start.elapsed().as_secs_f64() * args.speed;
+        sim.advance(t);
+        for &b in &buf[..n] {
+            sim.receive(b);
+        }
+        let out = sim.take_output();
+        if !out.is_empty() && !sim.disconnected {
+            master
+                .write_all(&out)
+                .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+        }
+        if let Some(f) = log.as_mut() {
+            for l in &sim.log[logged..] {
+                writeln!(f, "{l}").map_err(|e| relievo::Error(format!("grbl-sim log: {e}")))?;
+            }
+            logged = sim.log.len();
+        }
+        if sim.overflow > 0 {
+            relievo::bail!(
+                "grbl-sim: receive buffer overflow ({} bytes lost)",
+                sim.overflow
+            );
+        }
+    }
+}

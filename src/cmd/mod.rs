@@ -1,0 +1,55 @@
+//! The subcommands, one file each: flags parsed into the library's
+//! option structs, one library call, a summary printed.
+
+pub mod carve;
+pub mod grbl_sim;
+pub mod machine;
+pub mod relief;
+pub mod send;
+pub mod simulate;
+pub mod toolpath;
+
+use std::io::IsTerminal;
+
+pub fn parse_stock(s: &str) -> Result<(f64, f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(['x', 'X'])
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}': expected WxHxT in mm"))?;
+    match v[..] {
+        [a, b, c] => Ok((a, b, c)),
+        _ => Err(format!("'{s}': expected WxHxT in mm")),
+    }
+}
+
+pub fn parse_pair(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}': expected X,Y"))?;
+    match v[..] {
+        [a, b] => Ok((a, b)),
+        _ => Err(format!("'{s}': expected X,Y")),
+    }
+}
+
+/// A spinner on a terminal, nothing in pipes or with --quiet.
+pub fn spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
+    if quiet || !std::io::stderr().is_terminal() {
+        return None;
+    }
+    let pb = indicatif::ProgressBar::new_spinner();
+    pb.enable_steady_tick(std::time::Duration::from_millis(100));
+    Some(pb)
+}
+
+/// Stage timings for --verbose.
+pub fn print_timings(t: &relievo::timing::Timings) {
+    eprintln!(
+        "stage timings ({} threads):\n{}",
+        rayon::current_num_threads(),
+        t.report()
+    );
+}

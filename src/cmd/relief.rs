@@ -1,0 +1,175 @@
+//! `relievo relief`: a model (or the demo scene) to a relief file; the
+//! relief flags it shares with `carve`.
+
+use super::{print_timings, spinner};
+use clap::Args;
+use relievo::job::ReliefJob;
+use relievo::relief::Method;
+use relievo::scene::{Camera, View};
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct ReliefArgs {
+    /// OBJ, STL (ASCII or binary), grayscale depth PNG (white = near) or RGB normal-map PNG.
+    pub model: Option<PathBuf>,
+    /// Output relief: 16-bit PNG; a JSON sidecar is written beside it.
+    #[arg(short, long, default_value = "relief.png")]
+    pub output: PathBuf,
+    /// Also write a shaded preview PNG.
+    #[arg(long)]
+    pub preview: Option<PathBuf>,
+    #[command(flatten)]
+    pub opts: ReliefOpts,
+}
+
+#[derive(Args)]
+pub struct ReliefOpts {
+    /// View preset (where the eye is, seen from the model).
+    #[arg(long, value_enum, default_value_t = View::Front)]
+    pub view: View,
+    /// Extra turn about the vertical axis, degrees.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub yaw: f64,
+    /// Extra elevation of the eye, degrees.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub pitch: f64,
+    /// Field of view in degrees; 0 = orthographic.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    pub fov: f64,
+    /// Long side of the relief in pixels (meshes render at twice this).
+    #[arg(long, default_value_t = 512, allow_negative_numbers = true)]
+    pub resolution: usize,
+    /// Panel width in mm (the height follows the aspect).
+    #[arg(long, default_value_t = 100.0, allow_negative_numbers = true)]
+    pub width: f64,
+    /// Relief depth in mm [default: from --material, else 5].
+    #[arg(long, allow_negative_numbers = true)]
+    pub depth: Option<f64>,
+    /// Compression strength: C(x) = ln(1 + alpha x) / alpha [default: from --material, else 4].
+    #[arg(long, allow_negative_numbers = true)]
+    pub alpha: Option<f64>,
+    /// Silhouette threshold: a slope (scene depth per image width) above which an edge is an outline.
+    #[arg(long, default_value_t = 8.0, allow_negative_numbers = true)]
+    pub silhouette: f64,
+    /// Trace every outline with a constant step of this height (mm).
+    #[arg(long, allow_negative_numbers = true)]
+    pub steps: Option<f64>,
+    /// Hold the background flat at height 0 (Dirichlet) instead of free.
+    #[arg(long)]
+    pub flat_background: bool,
+    /// Feature-band gains, finest first, e.g. 2,1.5,1 [default: from --material].
+    #[arg(long, value_delimiter = ',')]
+    pub bands: Option<Vec<f64>>,
+    /// Scale one OBJ object's slopes: NAME=GAIN (repeatable).
+    #[arg(long, value_parser = parse_emphasis)]
+    pub emphasize: Vec<(String, f64)>,
+    /// Grayscale mask PNG for selective scaling (white = full gain).
+    #[arg(long)]
+    pub stencil: Option<PathBuf>,
+    /// Gain inside --stencil.
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
+    pub stencil_gain: f64,
+    /// Material preset: depth ratio, bands and compression (see machines/materials.toml).
+    #[arg(long)]
+    pub material: Option<String>,
+    /// Mirror left to right (for stamping dies).
+    #[arg(long)]
+    pub mirror: bool,
+    /// Hollow relief (for moulds).
+    #[arg(long)]
+    pub invert: bool,
+    /// gradient (Weyrich 2007) or linear (Cignoni 1997 baseline).
+    #[arg(long, value_enum, default_value_t = Method::Gradient)]
+    pub method: Method,
+    /// Also write the relief as a watertight binary STL solid.
+    #[arg(long)]
+    pub stl: Option<PathBuf>,
+    /// Base thickness under the relief in the STL, mm.
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
+    pub base: f64,
+    /// Also write the depth buffer (at relief resolution) as a 16-bit PNG.
+    #[arg(long)]
+    pub depth_out: Option<PathBuf>,
+}
+
+pub fn parse_emphasis(s: &str) -> Result<(String, f64), String> {
+    let (name, gain) = s
+        .split_once('=')
+        .ok_or_else(|| format!("'{s}': expected NAME=GAIN"))?;
+    let gain: f64 = gain
+        .parse()
+        .map_err(|_| format!("'{s}': GAIN must be a number"))?;
+    Ok((name.to_string(), gain))
+}
+
+impl ReliefOpts {
+    pub fn job(self, model: Option<PathBuf>, output: PathBuf) -> ReliefJob {
+        ReliefJob {
+            model,
+            camera: Camera {
+                view: self.view,
+                yaw: self.yaw,
+                pitch: self.pitch,
+                fov: self.fov,
+            },
+            resolution: self.resolution,
+            width_mm: self.width,
+            depth_mm: self.depth,
+            alpha: self.alpha,
+            silhouette: self.silhouette,
+            steps_mm: self.steps,
+            flat_background: self.flat_background,
+            bands: self.bands,
+            emphasize: self.emphasize,
+            stencil: self.stencil,
+            stencil_gain: self.stencil_gain,
+            material: self.material,
+            mirror: self.mirror,
+            invert: self.invert,
+            method: self.method,
+            output,
+            stl: self.stl,
+            base_mm: self.base,
+            preview: None,
+            depth_out: self.depth_out,
+        }
+    }
+}
+
+/// `relievo relief`.
+pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
+    let mut job = args.opts.job(args.model, args.output);
+    job.preview = args.preview;
+    let pb = spinner(quiet);
+    let mut stage = |s: &str| {
+        if let Some(pb) = &pb {
+            pb.set_message(s.to_string());
+        }
+    };
+    let res = job.run(&mut stage);
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
+    let s = res?;
+    if !quiet {
+        let r = &s.relief;
+        eprintln!(
+            "relief {} x {} px, {:.1} x {:.1} mm, depth {:.2} mm, {} silhouette edges -> {}",
+            r.heights.w,
+            r.heights.h,
+            r.width_mm,
+            r.height_mm,
+            r.depth_mm,
+            s.silhouette_edges,
+            s.written
+                .iter()
+                .map(|p| p.display().to_string())
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    if verbose {
+        print_timings(&s.timings);
+    }
+    Ok(())
+}

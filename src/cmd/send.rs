@@ -1,0 +1,72 @@
+//! `relievo send`: stream a job to a GRBL controller.
+
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Args)]
+pub struct SendArgs {
+    /// G-code job.
+    pub job: PathBuf,
+    /// Serial device, e.g. /dev/ttyUSB0.
+    #[arg(long)]
+    pub port: String,
+    #[arg(long, default_value_t = 115200)]
+    pub baud: u32,
+    /// Run the whole job in GRBL's check mode first; stop if any line fails.
+    #[arg(long)]
+    pub check: bool,
+    /// Send one line and wait for its reply (slower; for troublesome links).
+    #[arg(long)]
+    pub send_response: bool,
+    /// Start at this job line, re-entering safely.
+    #[arg(long, conflicts_with = "resume")]
+    pub resume_from: Option<usize>,
+    /// Resume after the last line this journal says GRBL acknowledged.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    /// Journal of acknowledged lines [default: JOB.journal].
+    #[arg(long)]
+    pub journal: Option<PathBuf>,
+}
+
+/// Ctrl-C: set by the signal handler, read by the sender.
+static CANCEL: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+extern "C" fn on_sigint(_: libc::c_int) {
+    CANCEL.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
+    use relievo::grbl::{job::SendJob, port::SerialLink};
+    let job = SendJob {
+        job: args.job,
+        check: args.check,
+        send_response: args.send_response,
+        resume_from: args.resume_from,
+        resume: args.resume,
+        journal: args.journal,
+        progress: !quiet,
+        rx_buffer: 128,
+    };
+    // read the job before touching the machine
+    relievo::grbl::sender::load_job(&job.job)?;
+    let mut port = SerialLink::open(&args.port, args.baud)?;
+    // SAFETY: the handler only stores to an atomic
+    unsafe {
+        libc::signal(
+            libc::SIGINT,
+            on_sigint as extern "C" fn(libc::c_int) as libc::sighandler_t,
+        );
+    }
+    let (o, n) = job.run(&mut port, &CANCEL)?;
+    if !quiet {
+        eprintln!(
+            "{}: {n} lines sent and acknowledged in {:.1} s ({} bytes, {:.0} bytes/s)",
+            job.job.display(),
+            o.seconds,
+            o.bytes,
+            o.bytes as f64 / o.seconds.max(1e-9)
+        );
+    }
+    Ok(())
+}
