@@ -361,3 +361,103 @@ fn an_inch_job_cuts_what_the_mm_job_cuts() {
     assert!(port.sim.log.iter().any(|l| l.starts_with("G20")));
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Acceptance 6: `--cutout --tabs 4`: simulated, the panel is cut free
+/// along its outline but for four tabs of the stated size.
+#[test]
+fn the_cutout_goes_through_but_for_four_tabs() {
+    let d = scratch("safe-cutout");
+    let relief = d.join("relief.png");
+    let job = d.join("job.nc");
+    ok(&run(&[
+        "relief",
+        "--resolution",
+        "200",
+        "--depth",
+        "5",
+        "-o",
+        relief.to_str().unwrap(),
+        "-q",
+    ]));
+    let (pw, ph) = (
+        sidecar(&relief)["width_mm"].as_f64().unwrap(),
+        sidecar(&relief)["height_mm"].as_f64().unwrap(),
+    );
+    // 5.5 mm stock under a 5 mm relief: the simulated cut (drawn down to
+    // the relief's depth) shows the tabs' tops, 2 mm over the bottom, at
+    // 1.5 mm, and a cut through at 0
+    let stock = format!("{}x{}x5.5", pw + 10.0, ph + 10.0);
+    let out = run(&[
+        "toolpath",
+        relief.to_str().unwrap(),
+        "--stock",
+        &stock,
+        "--margin",
+        "5",
+        "--cutout",
+        "--tabs",
+        "4",
+        "--tab-width",
+        "6",
+        "--tab-height",
+        "2",
+        "-o",
+        job.to_str().unwrap(),
+    ]);
+    ok(&out);
+    let said = String::from_utf8_lossy(&out.stdout);
+    let cut = d.join("cut.png");
+    let rep = simulate_report(&job, &relief, &cut, &[]);
+    assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001, "{rep}");
+    assert!(rep["engagement"]["plunges"].as_array().unwrap().is_empty());
+    let cells = cut_cells(&cut);
+    let pitch = pw / 200.0;
+    // the slot's centre line, one tool radius (1/8" flat) outside the panel
+    let r = 3.175 / 2.0;
+    let (x0, y0, x1, y1) = (5.0 - r, 5.0 - r, 5.0 + pw + r, 5.0 + ph + r);
+    let corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1), (x0, y0)];
+    let mut ring = Vec::new();
+    for w in corners.windows(2) {
+        let len = ((w[1].0 - w[0].0).abs() + (w[1].1 - w[0].1).abs()) / pitch;
+        for k in 0..len as usize {
+            let t = k as f64 / len;
+            let (x, y) = (
+                w[0].0 + (w[1].0 - w[0].0) * t,
+                w[0].1 + (w[1].1 - w[0].1) * t,
+            );
+            let c = cells
+                .iter()
+                .min_by(|a, b| {
+                    let da = (a.0 - x).powi(2) + (a.1 - y).powi(2);
+                    let db = (b.0 - x).powi(2) + (b.1 - y).powi(2);
+                    da.total_cmp(&db)
+                })
+                .unwrap();
+            ring.push(c.2);
+        }
+    }
+    let through = ring.iter().filter(|&&h| h < 1e-3).count();
+    // runs at the tab's top, 1.5 mm over the relief's floor
+    let mut runs = Vec::new();
+    let mut n = 0;
+    for &h in ring.iter().chain(std::iter::once(&0.0)) {
+        if (h - 1.5).abs() < 0.02 {
+            n += 1;
+        } else if n > 0 {
+            runs.push(n as f64 * pitch);
+            n = 0;
+        }
+    }
+    eprintln!(
+        "cutout: {} of {} ring cells cut through; tabs at the top {runs:?} mm long\n{said}",
+        through,
+        ring.len()
+    );
+    assert_eq!(runs.len(), 4, "{runs:?}");
+    assert!(runs.iter().all(|l| (l - 6.0).abs() <= 2.0 * pitch + 1e-9));
+    // all but the tabs and their 30-degree flanks cut through
+    let flanks = 4.0 * (6.0 + 2.0 * 2.1 / 30f64.to_radians().tan()) / pitch;
+    assert!(through as f64 >= ring.len() as f64 - flanks - 8.0);
+    assert!(said.contains("cutout"), "{said}");
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -16,6 +16,7 @@ use crate::toolpath::{path, raster, rough, waterline, Pass};
 use glam::DVec3;
 use std::path::{Path, PathBuf};
 
+pub mod cutout;
 mod judge;
 pub mod layout;
 mod order;
@@ -165,6 +166,8 @@ pub struct ToolpathJob {
     pub units: Units,
     /// The panel's layout on the stock and the machine.
     pub layout: layout::Layout,
+    /// A profile round the panel through the stock, on tabs.
+    pub cutout: Option<cutout::Cutout>,
     pub output: PathBuf,
     /// Top view of the toolpath.
     pub svg: Option<PathBuf>,
@@ -203,6 +206,8 @@ pub struct CamSummary {
 pub(crate) struct Op {
     title: &'static str,
     tool: Tool,
+    /// What the operator zeroes Z on when this op's tool goes in.
+    zero: String,
     settings: Settings,
     strategy: String,
     passes: Vec<Pass>,
@@ -210,6 +215,7 @@ pub(crate) struct Op {
 
 /// How deep each tool may cut: (depth of cut, slotting depth) by the
 /// material's cutting data for its working diameter.
+#[derive(Clone)]
 struct Limits {
     material: crate::materials::Material,
     /// The material's name as the user should read it.
@@ -398,6 +404,7 @@ impl ToolpathJob {
             ops.push(Op {
                 title: "roughing",
                 tool: rt,
+                zero: String::new(),
                 settings,
                 strategy: format!(
                     "roughing, layers {step_down:.3} mm, stepover {rstep:.3} mm, \
@@ -424,6 +431,7 @@ impl ToolpathJob {
             ops.push(Op {
                 title: "finishing-tool layers",
                 tool,
+                zero: String::new(),
                 settings: finish_settings.clone(),
                 strategy: format!("layers {:.3} mm with the finishing tool", op.1),
                 passes,
@@ -510,10 +518,27 @@ impl ToolpathJob {
         ops.push(Op {
             title: "finishing",
             tool,
+            zero: String::new(),
             settings: finish_settings,
             strategy: format!("finishing, {}", what.join(" + ")),
             passes,
         });
+        // the cutout last: the panel stays held by the whole stock while
+        // it is carved
+        if let Some(c) = &self.cutout {
+            ops.push(self.cutout_op(
+                c,
+                &m,
+                &tool,
+                &rough,
+                &plan,
+                relief,
+                &limits,
+                material.as_ref(),
+                &mut planned,
+                &mut notes,
+            )?);
+        }
         // emit: one file, tool changes with M0, or one file per tool
         let shift = plan.shift;
         let z_shift = match self.z_zero {
@@ -529,6 +554,12 @@ impl ToolpathJob {
             ),
             (ZZero::Top, None) => "set Z0 on the stock top again".to_string(),
         };
+        for op in &mut ops {
+            op.zero = match (self.z_zero, op.title) {
+                (ZZero::Top, "cutout") => "set Z0 on the stock top beside the panel".into(),
+                _ => zero.clone(),
+            };
+        }
         let n_rough = ops.iter().take_while(|o| o.title == "roughing").count();
         let groups: Vec<(PathBuf, Vec<&Op>)> = if self.split && n_rough > 0 {
             vec![
@@ -550,7 +581,7 @@ impl ToolpathJob {
         let mut texts = Vec::new();
         for (file, group) in &groups {
             let text = t.time("g-code", || {
-                self.emit(group, relief, &plan, &m, z_shift, &zero, &header_notes)
+                self.emit(group, relief, &plan, &m, z_shift, &header_notes)
             });
             texts.push((file.clone(), text));
         }
@@ -649,6 +680,101 @@ impl ToolpathJob {
             rapid_mm,
             cut_mm,
             timings: t,
+        })
+    }
+
+    /// The cutout with the job's roughing tool, else the machine's
+    /// largest flat end mill up to 1/4 in, else the finishing tool; in
+    /// layers no deeper than it may slot.
+    #[allow(clippy::too_many_arguments)]
+    fn cutout_op(
+        &self,
+        c: &cutout::Cutout,
+        m: &Machine,
+        finish: &Tool,
+        rough: &Option<Roughing>,
+        plan: &layout::Plan,
+        relief: &Relief,
+        limits: &Limits,
+        material: Option<&crate::materials::Material>,
+        planned: &mut stock::Planned,
+        notes: &mut Vec<String>,
+    ) -> Result<Op> {
+        let name = match rough {
+            Some(r) => Some(r.tool.clone()),
+            None => m.roughing_tool(finish).map(|(n, _)| n),
+        };
+        let ct = match &name {
+            Some(n) => m.tool(n)?,
+            None => *finish,
+        };
+        let d = ct.working_diameter();
+        let (pw, ph) = (relief.width_mm, relief.height_mm);
+        let (sw, sh, st) = plan.stock;
+        let (ax, ay) = plan.panel_at;
+        let room = ax.min(ay).min(sw - pw - ax).min(sh - ph - ay);
+        if room < d - 1e-9 {
+            bail!(
+                "--cutout: {} needs {d:.2} mm of stock round the panel, there is {room:.2} mm; \
+                 give a larger --stock or a --margin",
+                ct.spec()
+            );
+        }
+        if !(c.tab_width.is_finite() && c.tab_width > 0.0)
+            || !(c.tab_height.is_finite() && c.tab_height > 0.0 && c.tab_height < st)
+        {
+            bail!(
+                "--tab-width {} / --tab-height {}: must be positive, the height below the \
+                 stock's {st} mm",
+                c.tab_width,
+                c.tab_height
+            );
+        }
+        let (dc, slot) = Limits {
+            off: false,
+            ..limits.clone()
+        }
+        .of(&ct);
+        let step = if dc.min(slot).is_finite() {
+            dc.min(slot)
+        } else {
+            ct.radius()
+        };
+        let settings = self.settings(m, &ct, material, notes)?;
+        let passes = cutout::passes(
+            [0.0, 0.0, pw, ph],
+            ct.radius(),
+            st,
+            step,
+            c,
+            settings.safe_z,
+        );
+        let layers = passes.len();
+        notes.push(format!(
+            "cutout with {}: {layers} layers of {:.2} mm through {:.2} mm, {} tabs {} mm long, \
+             {} mm high",
+            ct.spec(),
+            (st + cutout::BREAK_THROUGH) / layers as f64,
+            st + cutout::BREAK_THROUGH,
+            c.tabs,
+            c.tab_width,
+            c.tab_height
+        ));
+        let passes = planned.ramp_and_cut(passes, ct, true);
+        Ok(Op {
+            title: "cutout",
+            tool: ct,
+            zero: String::new(),
+            settings,
+            strategy: format!(
+                "cutout round the panel, {:.2} mm deep in {layers} layers, {} tabs {} mm long \
+                 and {} mm high",
+                st + cutout::BREAK_THROUGH,
+                c.tabs,
+                c.tab_width,
+                c.tab_height
+            ),
+            passes,
         })
     }
 
@@ -941,7 +1067,6 @@ impl ToolpathJob {
         plan: &layout::Plan,
         m: &Machine,
         z_shift: f64,
-        zero: &str,
         notes: &[String],
     ) -> String {
         let header = |op: &Op| {
@@ -1009,7 +1134,7 @@ impl ToolpathJob {
         let shift = plan.shift;
         for (k, op) in ops.iter().enumerate() {
             if k > 0 && op.tool != ops[k - 1].tool {
-                e.tool_change(&header(op), &op.settings, zero);
+                e.tool_change(&header(op), &op.settings, &op.zero);
             } else if k > 0 {
                 for h in header(op).iter().skip(1) {
                     crate::gcode::emit::comment(&mut e.out, h);

@@ -125,6 +125,20 @@ pub struct CutOpts {
     /// stock's lower-left corner).
     #[arg(long)]
     pub margin: Option<f64>,
+    /// Cut the panel out of the stock at the end: a profile round it,
+    /// through the stock, holding it by tabs (needs stock round the
+    /// panel: --stock or --margin).
+    #[arg(long)]
+    pub cutout: bool,
+    /// Tabs holding the panel in the cutout.
+    #[arg(long, default_value_t = 4, requires = "cutout")]
+    pub tabs: usize,
+    /// Length of each tab along the panel's edge, mm.
+    #[arg(long, default_value_t = 6.0, requires = "cutout")]
+    pub tab_width: f64,
+    /// Height of each tab over the stock's bottom, mm.
+    #[arg(long, default_value_t = 2.0, requires = "cutout")]
+    pub tab_height: f64,
     /// Turn the panel a quarter (90 degrees counter-clockwise) on the machine.
     #[arg(long, value_parser = parse_rotation)]
     pub rotate: Option<bool>,
@@ -181,6 +195,11 @@ impl CutOpts {
                 margin: self.margin,
                 rotate: self.rotate.unwrap_or(false),
             },
+            cutout: self.cutout.then_some(relievo::cam::cutout::Cutout {
+                tabs: self.tabs,
+                tab_width: self.tab_width,
+                tab_height: self.tab_height,
+            }),
             svg: self.svg,
             preview: self.preview,
             light: self.light,
