@@ -720,9 +720,8 @@ impl ToolpathJob {
                 ct.spec()
             );
         }
-        if !(c.tab_width.is_finite() && c.tab_width > 0.0)
-            || !(c.tab_height.is_finite() && c.tab_height > 0.0 && c.tab_height < st)
-        {
+        let ok_tab = c.tab_width.is_finite() && c.tab_width > 0.0;
+        if !(ok_tab && c.tab_height.is_finite() && c.tab_height > 0.0 && c.tab_height < st) {
             bail!(
                 "--tab-width {} / --tab-height {}: must be positive, the height below the \
                  stock's {st} mm",
