@@ -118,20 +118,32 @@ impl SimulateJob {
             let text = String::from_utf8(text)
                 .map_err(|_| crate::Error(format!("{what}: not a text file")))?;
             let f = Frame::find(&text).map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            // a file placed by its own frame (a tile, say) moves into the
+            // first file's coordinates
+            let mut offset = glam::DVec3::ZERO;
             match (frame, f) {
                 (None, f) => frame = f,
-                (Some(a), Some(b)) if a != b => {
-                    bail!(
-                        "{what}: its frame differs from the first job's: {}",
-                        b.comment()
-                    )
+                (Some(a), Some(b)) => {
+                    let same_stock =
+                        (a.stock.2, a.stock.3, a.stock.4) == (b.stock.2, b.stock.3, b.stock.4);
+                    let d = (a.stock.0 - b.stock.0, a.stock.1 - b.stock.1);
+                    let same_panel = ((a.panel.0 - b.panel.0) - d.0).abs() < 1e-3
+                        && ((a.panel.1 - b.panel.1) - d.1).abs() < 1e-3;
+                    if !(same_stock && same_panel && a.z_bottom == b.z_bottom) {
+                        bail!(
+                            "{what}: its frame ({}) is not the first job's stock and panel ({})",
+                            b.comment(),
+                            a.comment()
+                        );
+                    }
+                    offset = glam::DVec3::new(d.0, d.1, 0.0);
                 }
                 _ => {}
             }
             let prog = t
                 .time("parse", || gcode::program(&text))
                 .map_err(|e| crate::Error(format!("{what}: {e}")))?;
-            progs.push((what, prog));
+            progs.push((what, prog, offset));
         }
         let relief: Relief = t.time("load relief", || {
             file::load(&self.relief, self.relief_width, self.relief_depth)
@@ -176,8 +188,8 @@ impl SimulateJob {
         let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
         let mut last_tool = None;
         let travel_origin = self.travel_origin.unwrap_or((x0, y0));
-        for (what, job) in &progs {
-            let prog = job.lowered(z_shift);
+        for (what, job, offset) in &progs {
+            let prog = job.moved(*offset - glam::DVec3::new(0.0, 0.0, z_shift));
             let (r, moves, runs) = t
                 .time("cut", || {
                     sim::cut_program_measured(&stock, &mut cut, &prog, tool)
@@ -187,8 +199,19 @@ impl SimulateJob {
             engagement.absorb(sim::Engagement::measure(&prog, &moves, &runs, stock.pitch));
             // lines are numbered per file; a second file's follow on
             rapids.extend(r.iter().map(|n| n + lines));
+            // a file moved into the first one's frame (a tile) has the
+            // machine's travel where its own moves begin
+            let origin = if *offset == glam::DVec3::ZERO || self.travel_origin.is_some() {
+                travel_origin
+            } else {
+                job.segments
+                    .iter()
+                    .fold((f64::INFINITY, f64::INFINITY), |(x, y), s| {
+                        (x.min(s.a.x).min(s.b.x), y.min(s.a.y).min(s.b.y))
+                    })
+            };
             out_of_travel.extend(
-                sim::out_of_travel(job, &machine, travel_origin)
+                sim::out_of_travel(job, &machine, origin)
                     .iter()
                     .map(|n| n + lines),
             );

@@ -461,3 +461,111 @@ fn the_cutout_goes_through_but_for_four_tabs() {
     assert!(said.contains("cutout"), "{said}");
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Acceptance 5 (tiles): a 600 x 400 mm stock on the 3018 (travel 300 x
+/// 180) in tiles that each fit; their simulated cuts put together equal
+/// the one big job's (on a machine large enough) within 1 um.
+#[test]
+fn tiles_fit_the_machine_and_cut_what_the_big_job_cuts() {
+    let d = scratch("safe-tiles");
+    let relief = d.join("big.png");
+    ok(&run(&[
+        "relief",
+        "--resolution",
+        "600",
+        "--width",
+        "600",
+        "-o",
+        relief.to_str().unwrap(),
+        "-q",
+    ]));
+    // the 3018 with room for the whole panel
+    let big = d.join("big.toml");
+    let profile = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("machines/3018.toml"),
+    )
+    .unwrap();
+    std::fs::write(
+        &big,
+        profile.replacen("x = 300.0\ny = 180.0", "x = 1000.0\ny = 1000.0", 1),
+    )
+    .unwrap();
+    let toolpath = |machine: &str, out: &std::path::Path, extra: &[&str]| {
+        let mut a = vec![
+            "toolpath",
+            relief.to_str().unwrap(),
+            "--machine",
+            machine,
+            "--z-zero",
+            "bottom",
+            "--stock",
+            "600x400x8",
+            "--stepover",
+            "1.5",
+            "-o",
+            out.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        run(&a)
+    };
+    // the big job does not fit the 3018, and says to tile it
+    let one = d.join("one.nc");
+    let refused = toolpath("3018", &one, &[]);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && err.contains("--tile"), "{err}");
+    ok(&toolpath(big.to_str().unwrap(), &one, &[]));
+    let tiled = d.join("t.nc");
+    let out = toolpath("3018", &tiled, &["--tile", "280x170"]);
+    ok(&out);
+    let mut tiles: Vec<std::path::PathBuf> = std::fs::read_dir(&d)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().contains("t-tile"))
+        .collect();
+    tiles.sort();
+    assert_eq!(tiles.len(), 9, "{tiles:?}");
+    for t in &tiles {
+        let text = std::fs::read_to_string(t).unwrap();
+        assert!(text.contains("(tile "), "{}", t.display());
+        let prog = relievo::gcode::program(&text).unwrap();
+        let (mut lo, mut hi) = (glam::DVec3::splat(1e9), glam::DVec3::splat(-1e9));
+        for s in &prog.segments {
+            lo = lo.min(s.a).min(s.b);
+            hi = hi.max(s.a).max(s.b);
+        }
+        let span = hi - lo;
+        eprintln!(
+            "{}: moves span {:.1} x {:.1} mm",
+            t.display(),
+            span.x,
+            span.y
+        );
+        assert!(span.x <= 300.0 && span.y <= 180.0);
+    }
+    let c1 = d.join("c1.png");
+    let r1 = simulate_report(&one, &relief, &c1, &["--machine", big.to_str().unwrap()]);
+    let c2 = d.join("c2.png");
+    let names: Vec<&str> = tiles.iter().map(|p| p.to_str().unwrap()).collect();
+    let mut extra = vec!["--machine", "3018"];
+    extra.extend(&names[1..]);
+    let r2 = simulate_report(&tiles[0], &relief, &c2, &extra);
+    let (a, b) = (relief_mm(&c1), relief_mm(&c2));
+    assert_eq!((a.0, a.1), (b.0, b.1));
+    let worst =
+        a.2.iter()
+            .zip(&b.2)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max);
+    eprintln!(
+        "9 tiles vs one job: largest difference {worst:.6} mm over {} cells; removed {} / {} mm3; \
+         out of travel: {}",
+        a.2.len(),
+        r1["removed_mm3"],
+        r2["removed_mm3"],
+        r2["out_of_travel"]
+    );
+    assert!(worst < 0.001, "{worst}");
+    assert!(r2["out_of_travel"].as_array().unwrap().is_empty());
+    assert!(r2["max_gouge_mm"].as_f64().unwrap() < 0.001);
+    std::fs::remove_dir_all(d).unwrap();
+}

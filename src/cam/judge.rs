@@ -23,8 +23,14 @@ pub struct Judged {
 }
 
 /// The programs (in stock-top Z once `z_shift` is taken off) cut in turn.
-pub fn run(progs: &[Program], relief: &Relief, plan: &Plan, z_shift: f64) -> Result<Judged> {
-    let stock = plan.stock_in_job(relief.pitch_mm(), relief.height_mm);
+pub fn run(
+    progs: &[Program],
+    relief: &Relief,
+    plan: &Plan,
+    z_shift: f64,
+    cell: f64,
+) -> Result<Judged> {
+    let stock = plan.stock_in_job(cell, relief.height_mm);
     let (w, h) = stock.cells();
     let mut cut = Grid::new(w, h, 0.0f32);
     let mut engagement = Engagement::default();
@@ -60,6 +66,38 @@ pub fn first_over(
         .find_map(|(k, ((m, runs), prog))| {
             Engagement::first_over(prog, m, runs, j.stock.pitch, limits).map(|o| (k, o))
         })
+}
+
+/// Refuse a job whose moves span more than the machine's travel, with
+/// the figures.
+pub fn fits_travel(
+    prog: &Program,
+    m: &crate::machine::Machine,
+    file: &std::path::Path,
+) -> Result<()> {
+    let (mut lo, mut hi) = (
+        glam::DVec3::splat(f64::INFINITY),
+        glam::DVec3::splat(f64::NEG_INFINITY),
+    );
+    for s in &prog.segments {
+        lo = lo.min(s.a).min(s.b);
+        hi = hi.max(s.a).max(s.b);
+    }
+    let span = hi - lo;
+    if span.x > m.travel.x + 1e-6 || span.y > m.travel.y + 1e-6 || span.z > m.travel.z + 1e-6 {
+        crate::bail!(
+            "{}: its moves span {:.1} x {:.1} x {:.1} mm, more than {}'s travel {} x {} x {} mm",
+            file.display(),
+            span.x,
+            span.y,
+            span.z,
+            m.name,
+            m.travel.x,
+            m.travel.y,
+            m.travel.z
+        );
+    }
+    Ok(())
 }
 
 /// Rapid and cutting travel over all programs, mm.

@@ -20,6 +20,8 @@ pub struct Layout {
     pub margin: Option<f64>,
     /// Turn the panel a quarter (counter-clockwise, seen from above).
     pub rotate: bool,
+    /// Cut the panel in tiles of at most this width x height, mm.
+    pub tile: Option<(f64, f64)>,
 }
 
 /// The layout resolved for one panel.
@@ -78,7 +80,16 @@ impl Layout {
         );
         let tz = depth + safe_z;
         let fits = |w: f64, h: f64| w <= m.travel.x + 1e-9 && h <= m.travel.y + 1e-9;
-        if !fits(pw, ph) || tz > m.travel.z {
+        if let Some((tw, th)) = self.tile {
+            if !fits(tw, th) {
+                bail!(
+                    "--tile {tw}x{th}: larger than {}'s travel {} x {} mm",
+                    m.name,
+                    m.travel.x,
+                    m.travel.y
+                );
+            }
+        } else if !fits(pw, ph) || tz > m.travel.z {
             let turned = if self.rotate {
                 "turned by --rotate 90, "
             } else {
@@ -244,6 +255,16 @@ impl Frame {
     }
 }
 
+/// The stock's cell size for planning and judging a job: the relief's
+/// pitch divided by the odd whole number that makes it at most the
+/// smallest tool radius `r` (so that relief samples stay cell centres,
+/// and no tool's footprint falls between cell centres).
+pub fn cell(pitch: f64, r: f64) -> f64 {
+    let k = (pitch / r - 1e-9).ceil().max(1.0) as usize;
+    let k = if k.is_multiple_of(2) { k + 1 } else { k };
+    pitch / k as f64
+}
+
 /// The relief turned a quarter counter-clockwise (seen from above) when
 /// `rotate`: the panel's height becomes its width.
 pub fn turned(r: &Relief, rotate: bool) -> Relief {
@@ -316,6 +337,14 @@ pub fn raise(z: &mut Grid<f64>, r: &Relief, pad: (f64, f64, f64), value: f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cells_are_the_smallest_radius_or_finer() {
+        assert_eq!(cell(0.8, 1.5), 0.8);
+        // 6 mm samples, a 1.5 mm radius: 6 / 5 (4 is even)
+        assert!((cell(6.0, 1.5) - 6.0 / 5.0).abs() < 1e-12);
+        assert!((cell(2.0, 1.5) - 2.0 / 3.0).abs() < 1e-12);
+    }
 
     #[test]
     fn a_frame_reads_back_as_written() {

@@ -21,6 +21,7 @@ mod judge;
 pub mod layout;
 mod order;
 mod stock;
+pub mod tile;
 mod view;
 
 /// Where the job's X0 Y0 is on the panel.
@@ -202,7 +203,11 @@ pub struct CamSummary {
     pub timings: Timings,
 }
 
+/// One file of a job: where it goes, its ops, its frame, its header notes.
+type JobFile = (PathBuf, Vec<Op>, layout::Plan, Vec<String>);
+
 /// One tool's share of the job.
+#[derive(Clone)]
 pub(crate) struct Op {
     title: &'static str,
     tool: Tool,
@@ -307,7 +312,12 @@ impl ToolpathJob {
         let floor = -relief.depth_mm;
         let (pw, ph) = (relief.width_mm, relief.height_mm);
         let panel = [0.0, 0.0, pw, ph];
-        let mut planned = stock::Planned::new(plan.stock_in_panel(relief.pitch_mm(), ph));
+        let min_r = match &self.rough {
+            Some(r) => m.tool(&r.tool)?.radius().min(tool.radius()),
+            None => tool.radius(),
+        };
+        let cell = layout::cell(relief.pitch_mm(), min_r.max(0.05));
+        let mut planned = stock::Planned::new(plan.stock_in_panel(cell, ph));
         let mut ops: Vec<Op> = Vec::new();
         let mut raw_points = 0;
         // roughing: asked for, or added when the finishing tool may not
@@ -561,14 +571,6 @@ impl ToolpathJob {
             };
         }
         let n_rough = ops.iter().take_while(|o| o.title == "roughing").count();
-        let groups: Vec<(PathBuf, Vec<&Op>)> = if self.split && n_rough > 0 {
-            vec![
-                (rough_out, ops[..n_rough].iter().collect()),
-                (self.output.clone(), ops[n_rough..].iter().collect()),
-            ]
-        } else {
-            vec![(self.output.clone(), ops.iter().collect())]
-        };
         let mut header_notes = notes.clone();
         if let Some(p) = pad {
             header_notes.push(format!(
@@ -578,19 +580,57 @@ impl ToolpathJob {
                 p.1 + shift.y
             ));
         }
+        // the files: one job, a split job, or one job per tile; each with
+        // its own frame and header notes
+        let files: Vec<JobFile> = match self.layout.tile {
+            Some(size) => t.time("tiles", || {
+                self.tiled(
+                    ops,
+                    relief,
+                    &plan,
+                    size,
+                    (&tool, cell),
+                    &header_notes,
+                    z_shift,
+                )
+            })?,
+            None if self.split && n_rough > 0 => {
+                let rest = ops.split_off(n_rough);
+                vec![
+                    (rough_out, ops, plan.clone(), header_notes.clone()),
+                    (
+                        self.output.clone(),
+                        rest,
+                        plan.clone(),
+                        header_notes.clone(),
+                    ),
+                ]
+            }
+            None => vec![(self.output.clone(), ops, plan.clone(), header_notes.clone())],
+        };
         let mut texts = Vec::new();
-        for (file, group) in &groups {
+        for (file, group, fplan, fnotes) in &files {
             let text = t.time("g-code", || {
-                self.emit(group, relief, &plan, &m, z_shift, &header_notes)
+                self.emit(group, relief, fplan, &m, z_shift, fnotes)
             });
             texts.push((file.clone(), text));
         }
-        // the simulator judges the job: depth of cut, plunges, residual
+        // the simulator judges the job: depth of cut, plunges, residual;
+        // every file placed in the one job's frame
         let progs: Vec<crate::gcode::Program> = texts
             .iter()
             .map(|(_, text)| crate::gcode::program(text))
             .collect::<Result<_>>()?;
-        let judged = t.time("judge", || judge::run(&progs, relief, &plan, z_shift))?;
+        for ((file, _), prog) in texts.iter().zip(&progs) {
+            judge::fits_travel(prog, &m, file)?;
+        }
+        let progs: Vec<crate::gcode::Program> = progs
+            .iter()
+            .zip(&files)
+            .map(|(p, f)| p.moved(plan.shift - f.2.shift))
+            .collect();
+        let judged = t.time("judge", || judge::run(&progs, relief, &plan, z_shift, cell))?;
+        let groups = &files;
         if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.of(tl)) {
             let what = format!(
                 "{}line {}: {} cuts {:.3} mm deep{} (allowed {:.3} mm in {})",
@@ -681,6 +721,106 @@ impl ToolpathJob {
             cut_mm,
             timings: t,
         })
+    }
+
+    /// The job's ops cut into tiles of at most `size` (row by row from the
+    /// lower-left), one file each: every pass clipped to its tile (the
+    /// clearing ops to the tile grown by the finishing tool's radius and
+    /// a little, so that finishing along a border meets cleared stock),
+    /// ramped in again where it now starts in material, travelling at
+    /// safe Z; X0 Y0 at the tile's lower-left corner.
+    #[allow(clippy::too_many_arguments)]
+    fn tiled(
+        &self,
+        ops: Vec<Op>,
+        relief: &Relief,
+        plan: &layout::Plan,
+        (tw, th): (f64, f64),
+        (finish, cell): (&Tool, f64),
+        notes: &[String],
+        z_shift: f64,
+    ) -> Result<Vec<JobFile>> {
+        if !(tw.is_finite() && th.is_finite() && tw > 0.0 && th > 0.0) {
+            bail!("--tile {tw}x{th}: sizes must be positive");
+        }
+        if self.cutout.is_some() {
+            bail!("--tile with --cutout: cut the tiles out one by one is not supported; leave out --cutout");
+        }
+        if self.split {
+            bail!(
+                "--tile with --split: every tile is a file of its own already; leave out --split"
+            );
+        }
+        if self.z_zero == ZZero::Top && ops.iter().any(|o| o.tool != ops[0].tool) {
+            bail!(
+                "--tile: the job changes tools, and the stock top does not survive roughing in \
+                 every tile; zero Z on the spoilboard: --z-zero bottom --stock WxHxT"
+            );
+        }
+        let (pw, ph) = (relief.width_mm, relief.height_mm);
+        let tiles = tile::grid(pw, ph, tw, th);
+        let grow = finish.radius() + 0.5;
+        let mut planned = stock::Planned::new(plan.stock_in_panel(cell, ph));
+        let stem = self
+            .output
+            .file_stem()
+            .map_or("job".into(), |s| s.to_string_lossy().to_string());
+        let (nx, ny) = tiles.last().map_or((1, 1), |t| t.1);
+        let mut out = Vec::new();
+        let mut prev: Option<[f64; 4]> = None;
+        for (rect, (c, r)) in &tiles {
+            let mut tile_ops = Vec::new();
+            for op in &ops {
+                let g = if op.title == "finishing" { 0.0 } else { grow };
+                let around = [rect[0] - g, rect[1] - g, rect[2] + g, rect[3] + g];
+                let safe = op.settings.safe_z;
+                let pieces: Vec<Pass> = op
+                    .passes
+                    .iter()
+                    .flat_map(|p| tile::clip(&p.pts, around))
+                    .map(|pts| Pass { pts, clear_z: safe })
+                    .collect();
+                let passes = planned.ramp_and_cut(pieces, op.tool, true);
+                if !passes.is_empty() {
+                    tile_ops.push(Op {
+                        passes,
+                        ..op.clone()
+                    });
+                }
+            }
+            if tile_ops.is_empty() {
+                continue;
+            }
+            let tplan = layout::Plan {
+                shift: DVec3::new(-rect[0], -rect[1], 0.0),
+                ..plan.clone()
+            };
+            let (sx, sy) = (rect[0] + plan.panel_at.0, rect[1] + plan.panel_at.1);
+            let mut n = notes.to_vec();
+            n.push(format!(
+                "tile {c},{r} of {nx} x {ny}: panel X{:.2}..{:.2} Y{:.2}..{:.2}; X0 Y0 at its \
+                 lower-left corner, X{sx:.2} Y{sy:.2} from the stock's lower-left corner{}",
+                rect[0],
+                rect[2],
+                rect[1],
+                rect[3],
+                match prev {
+                    Some(p) => format!(
+                        "; from the last tile, move the stock by X{:.2} Y{:.2} (or zero X and Y there)",
+                        -(rect[0] - p[0]),
+                        -(rect[1] - p[1])
+                    ),
+                    None => String::new(),
+                }
+            ));
+            if z_shift > 0.0 {
+                n.push("Z0 stays on the spoilboard from tile to tile".into());
+            }
+            prev = Some(*rect);
+            let file = self.output.with_file_name(format!("{stem}-tile{c}-{r}.nc"));
+            out.push((file, tile_ops, tplan, n));
+        }
+        Ok(out)
     }
 
     /// The cutout with the job's roughing tool, else the machine's
@@ -1061,7 +1201,7 @@ impl ToolpathJob {
     #[allow(clippy::too_many_arguments)]
     fn emit(
         &self,
-        ops: &[&Op],
+        ops: &[Op],
         relief: &Relief,
         plan: &layout::Plan,
         m: &Machine,
@@ -1127,7 +1267,7 @@ impl ToolpathJob {
             ),
         ];
         top.extend(notes.iter().cloned());
-        top.extend(header(ops[0]));
+        top.extend(header(&ops[0]));
         let inch = self.units == Units::In;
         let mut e = Emitter::new(&top, &ops[0].settings, inch, z_shift);
         let shift = plan.shift;

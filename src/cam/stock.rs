@@ -143,9 +143,11 @@ impl Planned {
     /// would meet it: what a finishing pass there would cut at once.
     pub fn left_above(&self, hf: &HeightField, region: [f64; 4], tool: &Tool) -> f64 {
         use rayon::prelude::*;
-        // a quarter radius apart: what is left lies in terraces and
-        // corners wider than that
-        let step = hf.pitch.max(tool.radius() / 4.0);
+        // a quarter radius apart (however coarse the relief's samples):
+        // what is left lies in terraces and corners wider than that; at
+        // most about 4 million points
+        let area = (region[2] - region[0]).max(0.0) * (region[3] - region[1]).max(0.0);
+        let step = (tool.radius() / 4.0).max((area / 4e6).sqrt());
         let nx = ((region[2] - region[0]) / step).ceil() as usize + 1;
         let ny = ((region[3] - region[1]) / step).ceil() as usize + 1;
         (0..ny)

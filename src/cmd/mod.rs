@@ -23,6 +23,18 @@ pub fn parse_stock(s: &str) -> Result<(f64, f64, f64), String> {
     }
 }
 
+pub fn parse_size(s: &str) -> Result<(f64, f64), String> {
+    let v: Vec<f64> = s
+        .split(['x', 'X'])
+        .map(|p| p.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("'{s}': expected WxH in mm"))?;
+    match v[..] {
+        [a, b] => Ok((a, b)),
+        _ => Err(format!("'{s}': expected WxH in mm")),
+    }
+}
+
 pub fn parse_pair(s: &str) -> Result<(f64, f64), String> {
     let v: Vec<f64> = s
         .split(',')

@@ -1,7 +1,7 @@
 //! `relievo toolpath`: a relief file to a GRBL job; the cutting flags
 //! it shares with `carve`.
 
-use super::{parse_pair, parse_stock, print_timings};
+use super::{parse_pair, parse_size, parse_stock, print_timings};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -125,6 +125,11 @@ pub struct CutOpts {
     /// stock's lower-left corner).
     #[arg(long)]
     pub margin: Option<f64>,
+    /// Cut a panel larger than the machine's travel in tiles of at most
+    /// WIDTHxHEIGHT mm, one job each (NAME-tileC-R.nc), the stock moved
+    /// between them as each job's header says.
+    #[arg(long, value_parser = parse_size)]
+    pub tile: Option<(f64, f64)>,
     /// Cut the panel out of the stock at the end: a profile round it,
     /// through the stock, holding it by tabs (needs stock round the
     /// panel: --stock or --margin).
@@ -194,6 +199,7 @@ impl CutOpts {
                 stock: self.stock,
                 margin: self.margin,
                 rotate: self.rotate.unwrap_or(false),
+                tile: self.tile,
             },
             cutout: self.cutout.then_some(relievo::cam::cutout::Cutout {
                 tabs: self.tabs,

@@ -48,10 +48,15 @@ impl Program {
     /// The moves with every Z lowered by `dz`: a job zeroed on the
     /// stock's bottom, seen from its top.
     pub fn lowered(&self, dz: f64) -> Program {
+        self.moved(DVec3::new(0.0, 0.0, -dz))
+    }
+
+    /// The moves shifted by `d`: a job seen from another origin.
+    pub fn moved(&self, d: DVec3) -> Program {
         let mut p = self.clone();
         for s in &mut p.segments {
-            s.a.z -= dz;
-            s.b.z -= dz;
+            s.a += d;
+            s.b += d;
         }
         p
     }
