@@ -569,3 +569,82 @@ fn tiles_fit_the_machine_and_cut_what_the_big_job_cuts() {
     assert!(r2["max_gouge_mm"].as_f64().unwrap() < 0.001);
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// `--boundary subject`: the finishing tool stays on the subject and a
+/// tool's diameter round it; the flat roughing tool clears the level
+/// background; the cut is the relief, without gouge. A free (not level)
+/// background is refused with the figures.
+#[test]
+fn the_finishing_tool_keeps_to_the_subject() {
+    let d = scratch("safe-boundary");
+    let job = d.join("job.nc");
+    let spot = fixture("spot.obj");
+    let carve = |extra: &[&str]| {
+        let mut a = vec![
+            "carve",
+            spot.as_str(),
+            "--resolution",
+            "150",
+            "--boundary",
+            "subject",
+            "-o",
+            job.to_str().unwrap(),
+        ];
+        a.extend_from_slice(extra);
+        run(&a)
+    };
+    let free = carve(&[]);
+    let err = String::from_utf8_lossy(&free.stderr);
+    assert!(
+        !free.status.success() && err.contains("--flat-background"),
+        "{err}"
+    );
+    let out = carve(&["--flat-background"]);
+    ok(&out);
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("finishing over the subject"), "{said}");
+    let relief = d.join("job-relief.png");
+    let rep = simulate_report(&job, &relief, &d.join("cut.png"), &[]);
+    assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001, "{rep}");
+    assert!(rep["max_residual_mm"].as_f64().unwrap() < 0.15, "{rep}");
+    // the finishing tool's cutting moves: over the subject (off the
+    // level background) or within its diameter of it
+    let (w, h, v, _) = relief_mm(&relief);
+    let side = sidecar(&relief);
+    let (pw, ph) = (
+        side["width_mm"].as_f64().unwrap(),
+        side["height_mm"].as_f64().unwrap(),
+    );
+    let p = pw / w as f64;
+    let subject: Vec<(f64, f64)> = (0..w * h)
+        .filter(|&k| v[k] > 0.01)
+        .map(|k| {
+            (
+                (k % w) as f64 * p + p / 2.0,
+                ph - ((k / w) as f64 * p + p / 2.0),
+            )
+        })
+        .collect();
+    let text = std::fs::read_to_string(&job).unwrap();
+    let from = text
+        .lines()
+        .position(|l| l.contains("for finishing)"))
+        .unwrap();
+    let prog = relievo::gcode::program(&text).unwrap();
+    let mut far = 0.0f64;
+    for s in prog
+        .segments
+        .iter()
+        .filter(|s| s.line > from && s.kind == relievo::gcode::Kind::Feed)
+        .step_by(7)
+    {
+        let nearest = subject
+            .iter()
+            .map(|q| ((q.0 - s.b.x).powi(2) + (q.1 - s.b.y).powi(2)).sqrt())
+            .fold(f64::INFINITY, f64::min);
+        far = far.max(nearest);
+    }
+    eprintln!("finishing moves lie within {far:.2} mm of the subject\n{said}");
+    assert!(far <= 3.175 + 2.0 * p, "{far}");
+    std::fs::remove_dir_all(d).unwrap();
+}

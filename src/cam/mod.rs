@@ -16,6 +16,7 @@ use crate::toolpath::{path, raster, rough, waterline, Pass};
 use glam::DVec3;
 use std::path::{Path, PathBuf};
 
+mod boundary;
 pub mod cutout;
 mod judge;
 pub mod layout;
@@ -128,6 +129,16 @@ pub enum ZZero {
     Bottom,
 }
 
+/// Where the finishing tool works.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Boundary {
+    /// The whole panel.
+    Panel,
+    /// The subject and a tool's diameter round it; the roughing tool
+    /// clears the background at its level.
+    Subject,
+}
+
 /// Units of the G-code.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Units {
@@ -169,6 +180,7 @@ pub struct ToolpathJob {
     pub layout: layout::Layout,
     /// A profile round the panel through the stock, on tabs.
     pub cutout: Option<cutout::Cutout>,
+    pub boundary: Boundary,
     pub output: PathBuf,
     /// Top view of the toolpath.
     pub svg: Option<PathBuf>,
@@ -322,19 +334,31 @@ impl ToolpathJob {
         let mut raw_points = 0;
         // roughing: asked for, or added when the finishing tool may not
         // cut the relief's depth in one pass
+        let subject = (self.boundary == Boundary::Subject)
+            .then(|| boundary::Subject::find(relief, tool.working_diameter()))
+            .transpose()?;
         let rough = match &self.rough {
             Some(r) => Some(r.clone()),
-            None if relief.depth_mm > limits.layer(&tool) + sim::engage::SLACK => {
+            None if relief.depth_mm > limits.layer(&tool) + sim::engage::SLACK
+                || subject.is_some() =>
+            {
                 match m.roughing_tool(&tool) {
                     Some((name, spec)) => {
-                        notes.push(format!(
-                            "roughing added with {name} ({spec}): the relief is {:.2} mm deep, \
-                             {} may cut {:.2} mm at once in {}",
-                            relief.depth_mm,
-                            tool.spec(),
-                            limits.layer(&tool),
-                            limits.name
-                        ));
+                        notes.push(if subject.is_some() {
+                            format!(
+                                "roughing added with {name} ({spec}) to clear the background \
+                                 (--boundary subject)"
+                            )
+                        } else {
+                            format!(
+                                "roughing added with {name} ({spec}): the relief is {:.2} mm \
+                                 deep, {} may cut {:.2} mm at once in {}",
+                                relief.depth_mm,
+                                tool.spec(),
+                                limits.layer(&tool),
+                                limits.name
+                            )
+                        });
                         Some(Roughing {
                             tool: name,
                             step_down: None,
@@ -342,6 +366,11 @@ impl ToolpathJob {
                             stock_to_leave: 0.3,
                         })
                     }
+                    None if subject.is_some() => bail!(
+                        "--boundary subject: {} has no flat end mill in its tool table to clear \
+                         the background; name one with --rough flat:D",
+                        m.name
+                    ),
                     None => None,
                 }
             }
@@ -363,8 +392,18 @@ impl ToolpathJob {
             (Some(p), Some(k)) => (x - p.0).abs() > k || (y - p.1).abs() > k,
             _ => true,
         };
+        // ... and, with --boundary subject, to the subject and its margin
+        let finish_here =
+            |x: f64, y: f64| off_pad(x, y) && subject.as_ref().is_none_or(|s| s.is_near(x, y));
         let keep_off_pad: Option<&(dyn Fn(f64, f64) -> bool + Sync)> =
-            pad.is_some().then_some(&off_pad);
+            (pad.is_some() || subject.is_some()).then_some(&finish_here);
+        if let Some(s) = &subject {
+            notes.push(format!(
+                "finishing over the subject and {:.2} mm round it: {:.0}% of the panel",
+                tool.working_diameter(),
+                100.0 * s.share()
+            ));
+        }
         if let Some(r) = &rough {
             let rt = m.tool(&r.tool)?;
             let settings = self.settings(&m, &rt, material.as_ref(), &mut notes)?;
@@ -415,7 +454,7 @@ impl ToolpathJob {
                 title: "roughing",
                 tool: rt,
                 zero: String::new(),
-                settings,
+                settings: settings.clone(),
                 strategy: format!(
                     "roughing, layers {step_down:.3} mm, stepover {rstep:.3} mm, \
                      stock to leave {} mm",
@@ -423,13 +462,47 @@ impl ToolpathJob {
                 ),
                 passes,
             });
+            // the background at its own level, by the roughing tool
+            if let Some(sub) = &subject {
+                let off = |x: f64, y: f64| !sub.is_inside(x, y) && off_pad(x, y);
+                let (bg, _) = t.time("background", || {
+                    self.raster(hf_main, &rt, panel, floor, rstep, Some(&off))
+                });
+                let safe = settings.safe_z;
+                let bg = bg
+                    .into_iter()
+                    .map(|pts| Pass { pts, clear_z: safe })
+                    .collect();
+                let passes = planned.ramp_and_cut(bg, rt, true);
+                ops.push(Op {
+                    title: "roughing",
+                    tool: rt,
+                    zero: String::new(),
+                    settings,
+                    strategy: format!(
+                        "the background at its level ({:.3} mm over the floor), raster, \
+                         stepover {rstep:.3} mm",
+                        sub.level
+                    ),
+                    passes,
+                });
+            }
         }
         // the finishing tool in layers wherever more is left than it may
         // cut at once: what roughing could not reach, or all of a relief
         // too deep for it when there is no roughing
         let fd = limits.layer(&tool);
         if let Some(op) = t.time("rest layers", || {
-            self.rest_layers(hf_main, &tool, &planned, panel, floor, fd, &finish_settings)
+            self.rest_layers(
+                hf_main,
+                &tool,
+                &planned,
+                panel,
+                floor,
+                fd,
+                &finish_settings,
+                keep_off_pad,
+            )
         }) {
             notes.push(format!(
                 "{} steps down in layers of {:.2} mm where more than {fd:.2} mm is left",
@@ -506,7 +579,7 @@ impl ToolpathJob {
             let fin = t.time("stock", || planned.ramp_and_cut(passes, tool, true));
             pp.extend(fin);
             if let Some(op) =
-                self.rest_layers(&hf, &tool, &planned, win, floor, fd, &finish_settings)
+                self.rest_layers(&hf, &tool, &planned, win, floor, fd, &finish_settings, None)
             {
                 pp.extend(planned.ramp_and_cut(op.0, tool, false));
             }
@@ -942,6 +1015,7 @@ impl ToolpathJob {
         floor: f64,
         most: f64,
         s: &Settings,
+        keep: Option<&(dyn Fn(f64, f64) -> bool + Sync)>,
     ) -> Option<(Vec<Pass>, f64)> {
         let left = planned.left_above(hf, region, tool);
         // (sampled a quarter radius apart: keep a fifth in hand)
@@ -951,7 +1025,14 @@ impl ToolpathJob {
         // room for the scallops and terraces the layers leave
         let layer = 0.5 * most.min(left);
         let r = tool.radius();
-        let material = |x: f64, y: f64| planned.highest(x, y, r);
+        // (where the finishing tool does not go, nor do its layers)
+        let material = |x: f64, y: f64| {
+            if keep.is_none_or(|k| k(x, y)) {
+                planned.highest(x, y, r)
+            } else {
+                f64::NEG_INFINITY
+            }
+        };
         let params = rough::Params {
             tool: *tool,
             stepover: 0.4 * tool.working_diameter(),

@@ -11,6 +11,9 @@ use crate::toolpath::dropcutter::HeightField;
 use crate::toolpath::{path, Pass};
 use glam::DVec3;
 
+/// Height of travels over the highest material on their way, mm.
+const TRAVEL_CLEARANCE: f64 = 1.0;
+
 pub struct Planned {
     pub stock: Stock,
     pub top: Grid<f32>,
@@ -94,7 +97,7 @@ impl Planned {
     /// false: later passes take its material) and kept in surface passes.
     pub fn ramp_and_cut(&mut self, passes: Vec<Pass>, tool: Tool, surface: bool) -> Vec<Pass> {
         let r = tool.radius();
-        let mut out = Vec::with_capacity(passes.len());
+        let mut out: Vec<Pass> = Vec::with_capacity(passes.len());
         for p in passes {
             let mut from = 0;
             let clear_z = p.clear_z;
@@ -113,10 +116,18 @@ impl Planned {
                         continue;
                     }
                 }
+                // travel from the last pass no higher than the material
+                // under the way (and a millimetre) needs
+                let travel = match out.last().and_then(|q| q.pts.last()) {
+                    Some(&end) => {
+                        clear_z.min(self.over_the_way(end, piece[0], r) + TRAVEL_CLEARANCE)
+                    }
+                    None => clear_z,
+                };
                 self.cut(&piece, tool);
                 out.push(Pass {
                     pts: piece,
-                    clear_z,
+                    clear_z: travel,
                 });
                 // the rest of the pass starts from the pass's own
                 // clearance height, which clears everything
@@ -124,6 +135,19 @@ impl Planned {
             }
         }
         out
+    }
+
+    /// The highest material within `r` of the straight way from `a` to
+    /// `b` (XY), sampled half a radius apart; at least both ends' Z.
+    fn over_the_way(&self, a: DVec3, b: DVec3, r: f64) -> f64 {
+        let len = (b - a).truncate().length();
+        let n = (len / (0.5 * r)).ceil() as usize + 1;
+        (0..=n)
+            .map(|k| {
+                let p = a + (b - a) * (k as f64 / n as f64);
+                self.highest(p.x, p.y, r)
+            })
+            .fold(a.z.max(b.z), f64::max)
     }
 
     /// The first point of `pts` reached by a drop steeper than 45 degrees

@@ -125,6 +125,11 @@ pub struct CutOpts {
     /// stock's lower-left corner).
     #[arg(long)]
     pub margin: Option<f64>,
+    /// Where the finishing tool works: the whole panel, or the subject
+    /// and a tool's diameter round it (the roughing tool then clears the
+    /// background at its own level).
+    #[arg(long, value_enum, default_value_t = relievo::cam::Boundary::Panel)]
+    pub boundary: relievo::cam::Boundary,
     /// Cut a panel larger than the machine's travel in tiles of at most
     /// WIDTHxHEIGHT mm, one job each (NAME-tileC-R.nc), the stock moved
     /// between them as each job's header says.
@@ -201,6 +206,7 @@ impl CutOpts {
                 rotate: self.rotate.unwrap_or(false),
                 tile: self.tile,
             },
+            boundary: self.boundary,
             cutout: self.cutout.then_some(relievo::cam::cutout::Cutout {
                 tabs: self.tabs,
                 tab_width: self.tab_width,
