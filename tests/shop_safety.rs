@@ -648,3 +648,61 @@ fn the_finishing_tool_keeps_to_the_subject() {
     assert!(far <= 3.175 + 2.0 * p, "{far}");
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Acceptance 7 (at test size): the armadillo's raster+waterline job
+/// draws an SVG that rsvg-convert renders, in paths of at most 2000
+/// moves, and its rapids are a small part of its travel.
+#[test]
+fn the_armadillo_svg_opens_and_its_rapids_are_short() {
+    let d = scratch("safe-svg");
+    let job = d.join("job.nc");
+    let svg = d.join("job.svg");
+    let out = run(&[
+        "carve",
+        &shared_model("armadillo.obj"),
+        "--resolution",
+        "400",
+        "--finish",
+        "raster+waterline",
+        "--allow-deep-cuts",
+        "--svg",
+        svg.to_str().unwrap(),
+        "-o",
+        job.to_str().unwrap(),
+    ]);
+    ok(&out);
+    let said = String::from_utf8_lossy(&out.stdout);
+    // "rapids R m, cutting C m; ..."
+    let line = said.lines().find(|l| l.starts_with("rapids ")).unwrap();
+    let m = |key: &str| -> f64 {
+        let rest = &line[line.find(key).unwrap() + key.len()..];
+        rest.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let (rapid, cut) = (m("rapids "), m("cutting "));
+    eprintln!("armadillo 400 px, raster+waterline: rapids {rapid} m, cutting {cut} m");
+    assert!(rapid < 0.2 * cut, "{said}");
+    let text = std::fs::read_to_string(&svg).unwrap();
+    for path in text.split("<path").skip(1) {
+        let moves = path.matches('L').count();
+        assert!(moves <= 2000, "a path of {moves} moves");
+    }
+    let rsvg = std::process::Command::new("rsvg-convert")
+        .args(["-w", "800", "-o"])
+        .arg(d.join("svg.png"))
+        .arg(&svg)
+        .output();
+    match rsvg {
+        Ok(o) => {
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            let (w, _, v) = read_png16(&d.join("svg.png"));
+            assert_eq!(w, 800);
+            // drawn: not one colour
+            assert!(v.iter().any(|&p| p != v[0]));
+        }
+        Err(_) if std::env::var("RELIEVO_REQUIRE_RSVG").is_err() => {
+            eprintln!("rsvg-convert not installed: SVG not rendered (.ci/run installs it)")
+        }
+        Err(e) => panic!("rsvg-convert: {e}"),
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}

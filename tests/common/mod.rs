@@ -22,6 +22,20 @@ pub fn fixture(name: &str) -> String {
         .to_string()
 }
 
+/// A model from ../shared/models (beside the repository; too large to
+/// keep among the fixtures).
+pub fn shared_model(name: &str) -> String {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/models")
+        .join(name);
+    assert!(
+        p.exists(),
+        "{}: the shared models are not beside the repository",
+        p.display()
+    );
+    p.display().to_string()
+}
+
 /// A fresh scratch directory for one test.
 pub fn scratch(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("relievo-test-{}-{name}", std::process::id()));
