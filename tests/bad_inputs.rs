@@ -161,6 +161,18 @@ fn bad_toolpath_flags_fail_cleanly() {
         (vec!["--tool", "ball:3", "--scallop", "2"], "--scallop"),
         (vec!["--material", "cheese"], "cheese"),
         (vec!["--rpm", "99999"], "--rpm"),
+        // hostile numbers (issue 14): a panic, a hang, an abort before
+        (vec!["--angle", "nan"], "--angle"),
+        (vec!["--stepover", "1e-320"], "stepover"),
+        (
+            vec!["--finish", "waterline", "--stepover", "1e-9"],
+            "stepover",
+        ),
+        (vec!["--stepover", "0.001"], "raise --stepover"),
+        (vec!["--tile", "0x10"], "--tile"),
+        (vec!["--cutout", "--tab-height", "50"], "--cutout"),
+        (vec!["--boundary", "subject"], "--boundary subject"),
+        (vec!["--z-zero", "bottom"], "--stock"),
     ] {
         let mut all = vec![
             "toolpath",

@@ -113,8 +113,10 @@ impl Stepover {
             }
         };
         let most = 2.0 * tool.radius();
-        if !(v.is_finite() && v > 0.0 && v <= most) {
-            bail!("stepover {v:.4} mm: must be positive and at most the tool diameter ({most} mm)");
+        if !(v.is_finite() && v >= MIN_STEPOVER && v <= most) {
+            bail!(
+                "stepover {v:.4e} mm: must be {MIN_STEPOVER} mm to the tool diameter ({most} mm)"
+            );
         }
         Ok(v)
     }
@@ -258,6 +260,14 @@ impl Limits {
     }
 }
 
+/// The finest stepover taken, mm.
+const MIN_STEPOVER: f64 = 1e-3;
+
+/// The most cutter-location points a finishing pass may take (about a
+/// minute of dropping on two cores); past it the job is refused with the
+/// figure.
+const MAX_CL_POINTS: f64 = 2e8;
+
 /// Size of the touch-off pad left by roughing, mm (a square).
 const PAD: f64 = 8.0;
 
@@ -312,6 +322,24 @@ impl ToolpathJob {
                 .map(|c| Stepover::Percent(c.finish_stepover)))
             .unwrap_or(Stepover::Percent(10.0));
         let step = stepover.mm(&tool)?;
+        if !(self.angle.is_finite() && self.angle.abs() <= 360.0) {
+            bail!(
+                "--angle {}: must be a number of degrees within -360..360",
+                self.angle
+            );
+        }
+        // the work a finish implies, before any of it is done
+        let (pw0, ph0) = (relief.width_mm, relief.height_mm);
+        let rows = (pw0.hypot(ph0) / step).ceil();
+        let per_row = (pw0.hypot(ph0) / relief.pitch_mm().min(step)).ceil();
+        if self.finish != Finish::Waterline && rows * per_row > MAX_CL_POINTS {
+            bail!(
+                "--stepover {step:.4e} mm: {rows:.0} rows of up to {per_row:.0} points ({:.0} million \
+                 CL points), more than the {:.0} million allowed; raise --stepover",
+                rows * per_row / 1e6,
+                MAX_CL_POINTS / 1e6
+            );
+        }
         let plan = self
             .layout
             .plan(relief, &m, finish_settings.safe_z, self.origin)?;
@@ -549,6 +577,15 @@ impl ToolpathJob {
             } else {
                 step
             };
+            // each level contours the whole CL grid
+            let levels = (relief.depth_mm / dz).ceil();
+            let grid = (relief.heights.w * relief.heights.h) as f64;
+            if levels * grid > 10.0 * MAX_CL_POINTS {
+                bail!(
+                    "--stepover {step:.4e} mm: {levels:.0} waterline levels over {grid:.0} \
+                     samples, more than allowed; raise --stepover"
+                );
+            }
             let loops = t.time("waterline", || {
                 self.waterlines(&hf, &tool, relief, floor, dz, climb, keep_off_pad)
             });
