@@ -82,6 +82,15 @@ impl Machine {
                 bail!("{name_or_path}: travel, max_rate and acceleration must be positive on every axis");
             }
         }
+        if !(m.spindle.min.is_finite() && m.spindle.min >= 0.0 && pos(m.spindle.max))
+            || m.spindle.min > m.spindle.max
+        {
+            bail!(
+                "{name_or_path}: spindle min {} and max {} rpm must be finite, 0 <= min <= max",
+                m.spindle.min,
+                m.spindle.max
+            );
+        }
         if !pos(m.junction_deviation) || m.rx_buffer < 16 {
             bail!("{name_or_path}: junction_deviation must be positive and rx_buffer at least 16");
         }

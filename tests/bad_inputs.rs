@@ -198,3 +198,90 @@ fn bad_toolpath_flags_fail_cleanly() {
     }
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Hostile numbers in files (issue 14): a sidecar's width of 5e-324, a
+/// machine profile's NaN spindle maximum, a 1e308 mm stock: each one
+/// clean error naming the input, no panic.
+#[test]
+fn hostile_numbers_in_files_fail_cleanly() {
+    let d = scratch("bad-numbers");
+    let relief = d.join("r.png");
+    demo_relief(&relief, "48");
+    let job = d.join("job.nc");
+    ok(&run(&[
+        "toolpath",
+        relief.to_str().unwrap(),
+        "-o",
+        job.to_str().unwrap(),
+        "-q",
+    ]));
+    let tiny = d.join("tiny.png");
+    std::fs::copy(&relief, &tiny).unwrap();
+    let side = std::fs::read_to_string(d.join("r.json")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&side).unwrap();
+    v["width_mm"] = serde_json::json!(5e-324);
+    std::fs::write(d.join("tiny.json"), v.to_string()).unwrap();
+    let profile =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("machines/3018.toml"))
+            .unwrap();
+    let nan = d.join("nan.toml");
+    let text: String = profile
+        .lines()
+        .map(|l| {
+            if l.starts_with("max = ") {
+                "max = nan"
+            } else {
+                l
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert!(text.contains("max = nan"));
+    std::fs::write(&nan, text).unwrap();
+    let out = d.join("out.nc");
+    let cut = d.join("out.png");
+    for (args, names) in [
+        (
+            vec![
+                "toolpath",
+                tiny.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "tiny.png: width 5e-324",
+        ),
+        (
+            vec![
+                "toolpath",
+                relief.to_str().unwrap(),
+                "--machine",
+                nan.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "nan.toml: spindle",
+        ),
+        (
+            vec![
+                "simulate",
+                job.to_str().unwrap(),
+                "--relief",
+                relief.to_str().unwrap(),
+                "--stock",
+                "1e308x1e308x1",
+                "-o",
+                cut.to_str().unwrap(),
+            ],
+            "--stock",
+        ),
+    ] {
+        let o = run(&args);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        assert!(err.contains(names), "{args:?}: '{err}' lacks '{names}'");
+        assert!(!out.exists() && !cut.exists());
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -254,14 +254,23 @@ fn send_over_a_pseudo_terminal() {
         log.to_str().unwrap(),
     ]);
     let out = run(&["send", path.to_str().unwrap(), "--port", &dev, "--check"]);
+    // acknowledged is not yet executed: the machine still runs the
+    // moves in its planner (in its own time) when `send` returns
+    let read = || -> Vec<String> {
+        std::fs::read_to_string(&log)
+            .unwrap_or_default()
+            .lines()
+            .map(str::to_string)
+            .collect()
+    };
+    let t0 = std::time::Instant::now();
+    while read().len() < lines.len() && t0.elapsed().as_secs_f64() < 10.0 {
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
     let _ = sim.kill();
     let _ = sim.wait();
     ok(&out);
-    let executed: Vec<String> = std::fs::read_to_string(&log)
-        .unwrap()
-        .lines()
-        .map(str::to_string)
-        .collect();
+    let executed = read();
     assert!(
         executed == lines,
         "{} of {} lines executed",

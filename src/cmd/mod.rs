@@ -18,7 +18,9 @@ pub fn parse_stock(s: &str) -> Result<(f64, f64, f64), String> {
         .collect::<Result<_, _>>()
         .map_err(|_| format!("'{s}': expected WxHxT in mm"))?;
     match v[..] {
-        [a, b, c] => Ok((a, b, c)),
+        // up to 10 m: a panel, not a number that overflows the stock grid
+        [a, b, c] if [a, b, c].iter().all(|x| (0.001..=1e4).contains(x)) => Ok((a, b, c)),
+        [_, _, _] => Err(format!("'{s}': each size must be within 0.001..10000 mm")),
         _ => Err(format!("'{s}': expected WxHxT in mm")),
     }
 }
@@ -30,7 +32,8 @@ pub fn parse_size(s: &str) -> Result<(f64, f64), String> {
         .collect::<Result<_, _>>()
         .map_err(|_| format!("'{s}': expected WxH in mm"))?;
     match v[..] {
-        [a, b] => Ok((a, b)),
+        [a, b] if [a, b].iter().all(|x| (0.001..=1e4).contains(x)) => Ok((a, b)),
+        [_, _] => Err(format!("'{s}': each size must be within 0.001..10000 mm")),
         _ => Err(format!("'{s}': expected WxH in mm")),
     }
 }

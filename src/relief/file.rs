@@ -137,8 +137,12 @@ pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result
             side_path.display()
         );
     };
-    if !(width > 0.0 && depth > 0.0 && width.is_finite() && depth.is_finite()) {
-        bail!("{what}: width and depth must be positive (got {width} x {depth} mm)");
+    // a panel from a hundredth of a millimetre to 10 m, a relief as deep
+    if !((1e-2..=1e4).contains(&width) && (1e-3..=1e4).contains(&depth)) {
+        bail!(
+            "{what}: width {width:?} mm and depth {depth:?} mm must be within 0.01..10000 and \
+             0.001..10000 mm"
+        );
     }
     let heights = g.map(|v| (*v as f64 * depth) as f32);
     Ok(Relief {
