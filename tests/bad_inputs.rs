@@ -134,6 +134,16 @@ fn each_bad_input_fails_cleanly() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// `relievo ARGS` fails with one error line containing `names`, no panic.
+fn fails_with(args: &[&str], names: &str) {
+    let o = run(args);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success(), "{args:?} succeeded");
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+    assert!(err.contains(names), "{args:?}: '{err}' lacks '{names}'");
+}
+
 /// Bad toolpath flags: one error line naming the flag, exit != 0, no job,
 /// no roughing file, no SVG left behind.
 #[test]
@@ -183,12 +193,7 @@ fn bad_toolpath_flags_fail_cleanly() {
             svg.to_str().unwrap(),
         ];
         all.extend(args.iter());
-        let o = run(&all);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(!o.status.success(), "{args:?} succeeded");
-        assert!(!err.contains("panicked"), "{args:?}: {err}");
-        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
-        assert!(err.contains(names), "{args:?}: '{err}' lacks '{names}'");
+        fails_with(&all, names);
         let left: Vec<_> = std::fs::read_dir(&d)
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
@@ -275,12 +280,7 @@ fn hostile_numbers_in_files_fail_cleanly() {
             "--stock",
         ),
     ] {
-        let o = run(&args);
-        let err = String::from_utf8_lossy(&o.stderr);
-        assert!(!o.status.success(), "{args:?} succeeded");
-        assert!(!err.contains("panicked"), "{args:?}: {err}");
-        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
-        assert!(err.contains(names), "{args:?}: '{err}' lacks '{names}'");
+        fails_with(&args, names);
         assert!(!out.exists() && !cut.exists());
     }
     std::fs::remove_dir_all(d).unwrap();
