@@ -205,8 +205,9 @@ fn bad_toolpath_flags_fail_cleanly() {
 }
 
 /// Hostile numbers in files (issue 14): a sidecar's width of 5e-324, a
-/// machine profile's NaN spindle maximum, a 1e308 mm stock: each one
-/// clean error naming the input, no panic.
+/// machine profile's NaN spindle maximum, a 1e308 mm stock, arcs of a
+/// kilometre's radius: each one clean error naming the input, no panic,
+/// no hang.
 #[test]
 fn hostile_numbers_in_files_fail_cleanly() {
     let d = scratch("bad-numbers");
@@ -243,9 +244,29 @@ fn hostile_numbers_in_files_fail_cleanly() {
         .join("\n");
     assert!(text.contains("max = nan"));
     std::fs::write(&nan, text).unwrap();
+    // 300 near-full circles a kilometre round (they hung the simulator)
+    let arcs = d.join("arcs.nc");
+    let mut text = String::from("G21 G90 G17\nG0 Z1\nG1 Z-0.5 F100\n");
+    for k in 0..300 {
+        text.push_str(&format!("G2 X{} Y0 R-1000000\n", ((k + 1) % 2) * 10));
+    }
+    std::fs::write(&arcs, text).unwrap();
     let out = d.join("out.nc");
     let cut = d.join("out.png");
     for (args, names) in [
+        (
+            vec![
+                "simulate",
+                arcs.to_str().unwrap(),
+                "--relief",
+                relief.to_str().unwrap(),
+                "--tool",
+                "ball:3",
+                "-o",
+                cut.to_str().unwrap(),
+            ],
+            "arcs.nc: line 4: arc radius 1000000.0 mm",
+        ),
         (
             vec![
                 "toolpath",

@@ -62,6 +62,10 @@ impl Program {
     }
 }
 
+/// Largest arc radius taken, mm: beyond any machine's travel, and it
+/// bounds the chords an arc takes (a full circle: about 22,000).
+pub const MAX_ARC_RADIUS: f64 = 10_000.0;
+
 /// Largest chord error when arcs are broken into straight moves (mm).
 pub const ARC_TOLERANCE: f64 = 1e-4;
 
@@ -221,6 +225,9 @@ fn arc(
     let (cx, cy) = centre;
     let r0 = ((a.x - cx).powi(2) + (a.y - cy).powi(2)).sqrt();
     let r1 = ((b.x - cx).powi(2) + (b.y - cy).powi(2)).sqrt();
+    if r0 > MAX_ARC_RADIUS {
+        bail!("line {n}: arc radius {r0:.1} mm is larger than {MAX_ARC_RADIUS} mm");
+    }
     if (r0 - r1).abs() > 0.005 + 0.001 * r0 || r0 == 0.0 {
         bail!("line {n}: arc end point is not on the circle (radius {r0:.4} at the start, {r1:.4} at the end)");
     }
