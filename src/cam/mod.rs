@@ -1128,6 +1128,11 @@ impl ToolpathJob {
                     _ => groups.push((true, vec![row])),
                 }
             } else {
+                // odd rows run right to left: their pieces too, in turn
+                let mut pieces = pieces;
+                if k % 2 == 1 {
+                    pieces.reverse();
+                }
                 for mut p in pieces {
                     if k % 2 == 1 {
                         p.reverse();
