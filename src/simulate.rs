@@ -204,11 +204,8 @@ impl SimulateJob {
             let origin = if *offset == glam::DVec3::ZERO || self.travel_origin.is_some() {
                 travel_origin
             } else {
-                job.segments
-                    .iter()
-                    .fold((f64::INFINITY, f64::INFINITY), |(x, y), s| {
-                        (x.min(s.a.x).min(s.b.x), y.min(s.a.y).min(s.b.y))
-                    })
+                let (lo, _) = job.bounds();
+                (lo.x, lo.y)
             };
             out_of_travel.extend(
                 sim::out_of_travel(job, &machine, origin)

@@ -225,12 +225,10 @@ fn the_pad_stands_through_roughing_and_z0_bottom_cuts_the_same() {
     let gouge = both["max_gouge_mm"].as_f64().unwrap();
     let residual = both["max_residual_mm"].as_f64().unwrap();
     // the relief under the pad, from the panel's place in the frame
-    let frame = both["frame"].as_str().unwrap().to_string();
-    let after = |key: &str| -> f64 {
-        let rest = &frame[frame.find(key).unwrap() + key.len()..];
-        rest.split([' ', ',']).next().unwrap().parse().unwrap()
-    };
-    let (ox, oy) = (after("panel X"), after("panel X0 Y"));
+    let frame = relievo::cam::layout::Frame::find(&std::fs::read_to_string(&job).unwrap())
+        .unwrap()
+        .unwrap();
+    let (ox, oy) = frame.panel;
     let (rw, rh, rv, _) = relief_mm(&relief);
     let relief_cells: Vec<(f64, f64, f64)> = (0..rw * rh)
         .map(|k| {
@@ -528,11 +526,7 @@ fn tiles_fit_the_machine_and_cut_what_the_big_job_cuts() {
         let text = std::fs::read_to_string(t).unwrap();
         assert!(text.contains("(tile "), "{}", t.display());
         let prog = relievo::gcode::program(&text).unwrap();
-        let (mut lo, mut hi) = (glam::DVec3::splat(1e9), glam::DVec3::splat(-1e9));
-        for s in &prog.segments {
-            lo = lo.min(s.a).min(s.b);
-            hi = hi.max(s.a).max(s.b);
-        }
+        let (lo, hi) = prog.bounds();
         let span = hi - lo;
         eprintln!(
             "{}: moves span {:.1} x {:.1} mm",

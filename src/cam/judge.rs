@@ -75,14 +75,7 @@ pub fn fits_travel(
     m: &crate::machine::Machine,
     file: &std::path::Path,
 ) -> Result<()> {
-    let (mut lo, mut hi) = (
-        glam::DVec3::splat(f64::INFINITY),
-        glam::DVec3::splat(f64::NEG_INFINITY),
-    );
-    for s in &prog.segments {
-        lo = lo.min(s.a).min(s.b);
-        hi = hi.max(s.a).max(s.b);
-    }
+    let (lo, hi) = prog.bounds();
     let span = hi - lo;
     if span.x > m.travel.x + 1e-6 || span.y > m.travel.y + 1e-6 || span.z > m.travel.z + 1e-6 {
         crate::bail!(

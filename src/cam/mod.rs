@@ -234,7 +234,6 @@ pub(crate) struct Op {
 
 /// How deep each tool may cut: (depth of cut, slotting depth) by the
 /// material's cutting data for its working diameter.
-#[derive(Clone)]
 struct Limits {
     material: crate::materials::Material,
     /// The material's name as the user should read it.
@@ -247,6 +246,10 @@ impl Limits {
         if self.off {
             return (f64::INFINITY, f64::INFINITY);
         }
+        self.material_of(t)
+    }
+    /// The material's own limits, even with --allow-deep-cuts.
+    fn material_of(&self, t: &Tool) -> (f64, f64) {
         self.material
             .cutting_for(t.working_diameter())
             .map_or((f64::INFINITY, f64::INFINITY), |c| {
@@ -759,11 +762,7 @@ impl ToolpathJob {
             bail!("{what}: rough first (--rough), lower --step-down, or pass --allow-deep-cuts");
         }
         if self.allow_deep_cuts {
-            let lim = Limits {
-                off: false,
-                ..limits
-            };
-            if let Some((_, o)) = judge::first_over(&judged, &progs, &|tl| lim.of(tl)) {
+            if let Some((_, o)) = judge::first_over(&judged, &progs, &|tl| limits.material_of(tl)) {
                 notes.push(format!(
                     "--allow-deep-cuts: line {} cuts {:.3} mm deep with {} (limit {:.3} mm)",
                     o.line,
@@ -979,11 +978,7 @@ impl ToolpathJob {
                 c.tab_height
             );
         }
-        let (dc, slot) = Limits {
-            off: false,
-            ..limits.clone()
-        }
-        .of(&ct);
+        let (dc, slot) = limits.material_of(&ct);
         let step = if dc.min(slot).is_finite() {
             dc.min(slot)
         } else {

@@ -51,6 +51,15 @@ impl Program {
         self.moved(DVec3::new(0.0, 0.0, -dz))
     }
 
+    /// The lowest and highest corners of the box all moves lie in (an
+    /// empty program: +inf and -inf).
+    pub fn bounds(&self) -> (DVec3, DVec3) {
+        self.segments.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), s| (lo.min(s.a).min(s.b), hi.max(s.a).max(s.b)),
+        )
+    }
+
     /// The moves shifted by `d`: a job seen from another origin.
     pub fn moved(&self, d: DVec3) -> Program {
         let mut p = self.clone();
