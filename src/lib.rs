@@ -21,6 +21,7 @@ pub mod grbl;
 pub mod machine;
 pub mod sim;
 pub mod simulate;
+pub mod surface;
 pub mod sweep;
 pub mod tool;
 pub mod toolpath;

@@ -29,8 +29,10 @@ pub struct SimulateJob {
     /// `(frame: ...)` header states, else the relief's panel, as thick as
     /// its depth plus 3 mm.
     pub stock: Option<(f64, f64, f64)>,
-    /// Stock cells per relief pixel along each axis.
-    pub oversample: usize,
+    /// Stock cells per relief pixel along each axis; `None` = fine enough
+    /// that a cut's bottom between cell centres lies within
+    /// `BETWEEN_CELLS` of what the cells show (`oversample_for`).
+    pub oversample: Option<usize>,
     pub machine: String,
     /// Job coordinates of the machine travel box's lower-left corner;
     /// `None` = the stock's lower-left corner.
@@ -49,7 +51,7 @@ impl Default for SimulateJob {
             relief_depth: None,
             tool: None,
             stock: None,
-            oversample: 1,
+            oversample: None,
             machine: "grbl-generic".into(),
             travel_origin: None,
             output: PathBuf::from("cut.png"),
@@ -90,11 +92,47 @@ fn deviation_png(dev: &Grid<f32>, gouge: f64, residual: f64) -> Vec<u8> {
     file::png_rgb(dev.w, dev.h, &rgb)
 }
 
+/// What a cut's bottom may hide between stock cells by default (mm).
+pub const BETWEEN_CELLS: f64 = 1e-3;
+/// Most stock cells per relief pixel along each axis.
+pub const MAX_OVERSAMPLE: usize = 15;
+/// Most stock cells an automatic choice makes.
+const AUTO_CELLS: usize = 1 << 25;
+
+/// How far below the cell centres a tool's cut can reach between them:
+/// its profile half a cell diagonal from the tip (where a ball's groove
+/// bottom may run between rows of centres). A V-bit's point is sharp, so
+/// its bound is linear in the cell size.
+pub fn between_cells(tools: &[Tool], cell: f64) -> f64 {
+    let half_diagonal = cell / std::f64::consts::SQRT_2;
+    tools
+        .iter()
+        .map(|t| t.profile(half_diagonal.min(t.radius())))
+        .fold(0.0, f64::max)
+}
+
+/// The smallest odd number of stock cells per relief pixel (odd, so that
+/// cells stay centred on the samples) that keeps `between_cells` within
+/// BETWEEN_CELLS, as far as MAX_OVERSAMPLE and AUTO_CELLS allow.
+pub fn oversample_for(tools: &[Tool], pitch: f64, samples: usize) -> usize {
+    let mut k = 1;
+    while between_cells(tools, pitch / k as f64) > BETWEEN_CELLS
+        && k + 2 <= MAX_OVERSAMPLE
+        && samples * (k + 2) * (k + 2) <= AUTO_CELLS
+    {
+        k += 2;
+    }
+    k
+}
+
 impl SimulateJob {
     pub fn run(&self) -> Result<SimSummary> {
         let mut t = Timings::default();
-        if !(1..=16).contains(&self.oversample) {
-            bail!("--oversample {}: must be 1 to 16", self.oversample);
+        if let Some(k) = self
+            .oversample
+            .filter(|k| !(1..=MAX_OVERSAMPLE).contains(k))
+        {
+            bail!("--oversample {k}: must be 1 to {MAX_OVERSAMPLE}");
         }
         for o in [
             Some(&self.output),
@@ -148,7 +186,21 @@ impl SimulateJob {
         let relief: Relief = t.time("load relief", || {
             file::load(&self.relief, self.relief_width, self.relief_depth)
         })?;
-        let pitch = relief.pitch_mm() / self.oversample as f64;
+        let tool = self.tool.as_deref().map(Tool::parse).transpose()?;
+        let mut tools = Vec::new();
+        for (what, prog, _) in &progs {
+            let runs =
+                sim::tool_runs(prog, tool).map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            tools.extend(runs.iter().map(|r| r.2));
+        }
+        let cells_per_px = self.oversample.unwrap_or_else(|| {
+            oversample_for(
+                &tools,
+                relief.pitch_mm(),
+                relief.heights.w * relief.heights.h,
+            )
+        });
+        let pitch = relief.pitch_mm() / cells_per_px as f64;
         // the stock and the relief where the job's header puts them
         let (x0, y0, fw, fh, ft) = frame.map_or(
             (
@@ -183,7 +235,6 @@ impl SimulateJob {
             bail!("--stock/--oversample: {w} x {h} cells is too many");
         }
         let mut cut = Grid::new(w, h, 0.0f32);
-        let tool = self.tool.as_deref().map(Tool::parse).transpose()?;
         let mut engagement = sim::Engagement::default();
         let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
         let mut last_tool = None;
@@ -219,8 +270,17 @@ impl SimulateJob {
         let (gouge, residual, mean, dev) = t.time("compare", || {
             sim::deviation(&stock, &cut, &relief, panel_at)
         });
+        let max_gouge_at_mm = (gouge > 0.0)
+            .then(|| {
+                dev.data
+                    .iter()
+                    .position(|&d| !d.is_nan() && -(d as f64) >= gouge)
+                    .map(|k| stock.centre(k % dev.w, k / dev.w))
+            })
+            .flatten();
         let report = Report {
             max_gouge_mm: gouge,
+            max_gouge_at_mm,
             max_residual_mm: residual,
             mean_residual_mm: mean,
             removed_mm3: sim::removed(&stock, &cut),
@@ -230,6 +290,8 @@ impl SimulateJob {
             lines,
             engagement,
             frame: frame.map(|f| f.comment()),
+            cell_mm: stock.pitch,
+            between_cells_mm: between_cells(&tools, stock.pitch),
         };
         let what = progs
             .iter()

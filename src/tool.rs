@@ -97,6 +97,126 @@ impl Tool {
         }
     }
 
+    /// A lower bound of the profile at sqrt(d2) from the axis, cheap
+    /// enough for pruning: for a ball its osculating paraboloid, which
+    /// lies inside the sphere.
+    #[inline]
+    pub fn profile_below(&self, d2: f64) -> f64 {
+        match *self {
+            Tool::Ball { d } => d2 / d,
+            Tool::Flat { .. } => 0.0,
+            _ => self.profile(d2.sqrt()),
+        }
+    }
+
+    /// Distance from the axis at which the tool, lowered onto a plane
+    /// rising `g` (mm per mm), touches it first: where the profile's slope
+    /// equals g, else the rim. The profile is convex, so this is the one
+    /// maximum of plane - profile along the plane's steepest direction.
+    #[inline]
+    pub fn facet_radius(&self, g: f64) -> f64 {
+        let r = self.radius();
+        match *self {
+            Tool::Ball { .. } => r * g / (1.0 + g * g).sqrt(),
+            Tool::Flat { .. } => {
+                if g > 0.0 {
+                    r
+                } else {
+                    0.0
+                }
+            }
+            Tool::VBit { angle, .. } => {
+                if g > 1.0 / (angle.to_radians() / 2.0).tan() {
+                    r
+                } else {
+                    0.0
+                }
+            }
+            Tool::TaperBall {
+                tip_r, half_angle, ..
+            } => {
+                if g <= 1.0 / half_angle.to_radians().tan() {
+                    tip_r * g / (1.0 + g * g).sqrt()
+                } else {
+                    r
+                }
+            }
+        }
+    }
+
+    /// Where along a straight edge the tool touches it first: the edge
+    /// passes `d` from the axis and rises `m` (mm per mm); the answer is
+    /// the offset from the edge's nearest point to the axis, +-inf for
+    /// "at the end of the reach". Two candidates (a tapered ball's sphere
+    /// and cone regimes; the others repeat one); the caller clamps them to
+    /// the edge and keeps the higher contact.
+    #[inline]
+    pub fn edge_offsets(&self, m: f64, d: f64) -> [f64; 2] {
+        let sphere = |rr: f64| m * (rr * rr - d * d).max(0.0).sqrt() / (1.0 + m * m).sqrt();
+        let cone = |k: f64| {
+            if m.abs() < k {
+                m * d / (k * k - m * m).sqrt()
+            } else {
+                m.signum() * f64::INFINITY
+            }
+        };
+        match *self {
+            Tool::Ball { d: dia } => {
+                let u = sphere(dia / 2.0);
+                [u, u]
+            }
+            Tool::Flat { .. } => {
+                let u = if m == 0.0 {
+                    0.0
+                } else {
+                    m.signum() * f64::INFINITY
+                };
+                [u, u]
+            }
+            Tool::VBit { angle, .. } => {
+                let u = cone(1.0 / (angle.to_radians() / 2.0).tan());
+                [u, u]
+            }
+            Tool::TaperBall {
+                tip_r, half_angle, ..
+            } => [sphere(tip_r), cone(1.0 / half_angle.to_radians().tan())],
+        }
+    }
+
+    /// Largest curvature (Hessian norm of profile(|p - axis|) over p) of
+    /// the cutting surface between `lo` and `hi` from the axis (both
+    /// within the radius); +inf at a V point. Bounds how far the tool can
+    /// sink into a triangle below what its corners hold it at.
+    #[inline]
+    pub fn curvature_bound(&self, lo: f64, hi: f64) -> f64 {
+        let sphere = |rr: f64, h: f64| {
+            let q = (rr * rr - h * h).max(0.0);
+            rr * rr / (q * q.sqrt())
+        };
+        match *self {
+            Tool::Ball { d } => sphere(d / 2.0, hi),
+            Tool::Flat { .. } => 0.0,
+            Tool::VBit { angle, .. } => 1.0 / ((angle.to_radians() / 2.0).tan() * lo),
+            Tool::TaperBall {
+                tip_r, half_angle, ..
+            } => {
+                let a = half_angle.to_radians();
+                let r0 = tip_r * a.cos();
+                let s = if lo <= r0 {
+                    sphere(tip_r, hi.min(r0))
+                } else {
+                    0.0
+                };
+                let c = if hi >= r0 {
+                    1.0 / (a.tan() * lo.max(r0))
+                } else {
+                    0.0
+                };
+                s.max(c)
+            }
+        }
+    }
+
     /// Width of the cutting surface at `depth` above the tip (mm): the
     /// widest cut the tool makes that deep.
     pub fn width_at(&self, depth: f64) -> f64 {

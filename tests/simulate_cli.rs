@@ -14,7 +14,9 @@ fn flat_relief(dir: &Path, w: usize, h: usize, pitch: f64) -> PathBuf {
     p
 }
 
-/// Simulate `job` on `relief`; returns the cut (w, h, Z in mm) and the report.
+/// Simulate `job` on `relief` with one stock cell per relief pixel (the
+/// hand-computed profiles below are read at the pixels); returns the cut
+/// (w, h, Z in mm) and the report.
 fn simulate(
     dir: &Path,
     relief: &Path,
@@ -24,7 +26,7 @@ fn simulate(
     let nc = dir.join("job.nc");
     std::fs::write(&nc, job).unwrap();
     let cut = dir.join("cut.png");
-    let report = simulate_report(&nc, relief, &cut, &["--tool", tool]);
+    let report = simulate_report(&nc, relief, &cut, &["--tool", tool, "--oversample", "1"]);
     let (w, h, mm, depth) = relief_mm(&cut);
     (w, h, mm.iter().map(|v| v - depth).collect(), report)
 }
@@ -44,6 +46,45 @@ fn ball(r: f64, rho: f64) -> f64 {
     } else {
         f64::INFINITY
     }
+}
+
+/// A groove cut 0.1 mm into a flat relief midway between two rows of its
+/// samples: the default stock is fine enough to see its bottom (one cell
+/// per pixel would read 0.080 mm), and the report states its bound.
+#[test]
+fn a_groove_between_sample_rows_reads_its_full_depth() {
+    let d = scratch("sim-midway");
+    // 0.5 mm pixels: sample rows at Y 25.25 and 24.75, the groove at 25
+    let relief = flat_relief(&d, 200, 100, 0.5);
+    let nc = d.join("job.nc");
+    std::fs::write(
+        &nc,
+        "G21 G90\nG0 Z5\nG0 X10 Y25\nG1 Z-0.1 F100\nG1 X90 F300\nG0 Z5\nM30\n",
+    )
+    .unwrap();
+    let cut = d.join("cut.png");
+    let rep = simulate_report(&nc, &relief, &cut, &["--tool", "ball:3.175"]);
+    let gouge = rep["max_gouge_mm"].as_f64().unwrap();
+    assert!((gouge - 0.1).abs() <= 0.002, "{gouge}");
+    let (cell, between) = (
+        rep["cell_mm"].as_f64().unwrap(),
+        rep["between_cells_mm"].as_f64().unwrap(),
+    );
+    assert!(
+        between <= 1e-3 && cell < 0.5,
+        "cells {cell} mm, between {between} mm"
+    );
+    // and as one cell per pixel did, for the record
+    let coarse = simulate_report(
+        &nc,
+        &relief,
+        &cut,
+        &["--tool", "ball:3.175", "--oversample", "1"],
+    );
+    let g1 = coarse["max_gouge_mm"].as_f64().unwrap();
+    assert!((g1 - 0.080).abs() < 0.002, "{g1}");
+    assert!(coarse["between_cells_mm"].as_f64().unwrap() > 0.039);
+    std::fs::remove_dir_all(d).unwrap();
 }
 
 #[test]
@@ -166,8 +207,9 @@ fn a_rapid_through_stock_is_reported_with_its_line() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
-/// A known-good ball-end job (brute-force drop-cutter on every sample of
-/// a smooth relief), then the same job shifted down by 0.1 mm.
+/// A known-good ball-end job (brute-force drop-cutter on a dense sampling
+/// of the relief's continuous surface: two triangles per cell, flat to the
+/// panel's edges), then the same job shifted down by 0.1 mm.
 #[test]
 fn a_known_good_cut_shifted_down_gouges_by_the_shift() {
     let d = scratch("sim-shift");
@@ -185,18 +227,58 @@ fn a_known_good_cut_shifted_down_gouges_by_the_shift() {
     std::fs::write(relief.with_extension("json"), side.to_string()).unwrap();
     let (w, h, mm, depth) = relief_mm(&relief);
     let p = 32.0 / w as f64;
+    let (pw, ph) = (w as f64 * p, h as f64 * p);
     let r = 1.0;
-    // brute-force drop-cutter of a ball on the samples: the lowest tip Z
-    // touching no sample
+    // the surface: sample heights joined by the triangles a-b-c and
+    // b-c-d of each cell (a top-left, d bottom-right), flat to the edges
+    let sample = |i: isize, j: isize| {
+        let (i, j) = (
+            i.clamp(0, w as isize - 1) as usize,
+            j.clamp(0, h as isize - 1) as usize,
+        );
+        mm[j * w + i] - depth
+    };
+    let surface = |x: f64, y: f64| {
+        let (fx, fy) = (x / p - 0.5, (ph - y) / p - 0.5);
+        let (i, j) = (fx.floor() as isize, fy.floor() as isize);
+        let (u, v) = (fx - i as f64, fy - j as f64);
+        let (za, zb, zc, zd) = (
+            sample(i, j),
+            sample(i + 1, j),
+            sample(i, j + 1),
+            sample(i + 1, j + 1),
+        );
+        if u + v <= 1.0 {
+            za + u * (zb - za) + v * (zc - za)
+        } else {
+            zd + (1.0 - u) * (zc - zd) + (1.0 - v) * (zb - zd)
+        }
+    };
+    // every 1/16 mm: a ball held by these points sinks at most
+    // 1 - sqrt(1 - 0.022^2) = 0.25 um between them
+    let q = 1.0 / 16.0;
+    let dense: Vec<Vec<f64>> = (0..=(ph / q) as usize)
+        .map(|b| {
+            (0..=(pw / q) as usize)
+                .map(|a| surface(a as f64 * q, b as f64 * q))
+                .collect()
+        })
+        .collect();
     let cl = |x: f64, y: f64| {
         let mut z = f64::MIN;
-        let (ci, cj) = ((x / p) as isize, ((h as f64 * p - y) / p) as isize);
-        for j in (cj - 4).max(0) as usize..((cj + 5).max(0) as usize).min(h) {
-            for i in (ci - 4).max(0) as usize..((ci + 5).max(0) as usize).min(w) {
-                let (sx, sy) = ((i as f64 + 0.5) * p, h as f64 * p - (j as f64 + 0.5) * p);
-                let rho = ((sx - x).powi(2) + (sy - y).powi(2)).sqrt();
+        let (a0, a1) = (
+            ((x - r) / q).ceil().max(0.0) as usize,
+            ((x + r) / q).floor().min(pw / q) as usize,
+        );
+        let (b0, b1) = (
+            ((y - r) / q).ceil().max(0.0) as usize,
+            ((y + r) / q).floor().min(ph / q) as usize,
+        );
+        for (b, row) in dense.iter().enumerate().take(b1 + 1).skip(b0) {
+            for (a, s) in row.iter().enumerate().take(a1 + 1).skip(a0) {
+                let rho = ((a as f64 * q - x).powi(2) + (b as f64 * q - y).powi(2)).sqrt();
                 if rho <= r {
-                    z = z.max(mm[j * w + i] - depth - ball(r, rho));
+                    z = z.max(s - ball(r, rho));
                 }
             }
         }

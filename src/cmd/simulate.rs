@@ -27,9 +27,11 @@ pub struct SimulateArgs {
     /// 3 mm thick].
     #[arg(long, value_parser = parse_stock)]
     pub stock: Option<(f64, f64, f64)>,
-    /// Stock cells per relief pixel along each axis.
-    #[arg(long, default_value_t = 1)]
-    pub oversample: usize,
+    /// Stock cells per relief pixel along each axis [default: the fewest
+    /// (odd, up to 15) that keep what a cut hides between cell centres
+    /// within 1 um for the job's tools].
+    #[arg(long)]
+    pub oversample: Option<usize>,
     /// Machine profile: grbl-generic, 3018, shapeoko, or a TOML file.
     #[arg(long, default_value = "grbl-generic")]
     pub machine: String,

@@ -84,6 +84,9 @@ impl Stock {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Report {
     pub max_gouge_mm: f64,
+    /// Where the deepest gouge is (job X, Y), if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_gouge_at_mm: Option<(f64, f64)>,
     pub max_residual_mm: f64,
     pub mean_residual_mm: f64,
     pub removed_mm3: f64,
@@ -97,6 +100,12 @@ pub struct Report {
     /// The stock and relief placement read from the job's header.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub frame: Option<String>,
+    /// Gouge and residual are measured at the centres of stock cells this
+    /// far apart, against the relief's continuous surface...
+    pub cell_mm: f64,
+    /// ...and a cut's bottom can reach at most this much deeper between
+    /// them (the tools' profile half a cell diagonal from the tip).
+    pub between_cells_mm: f64,
 }
 
 impl Report {
@@ -115,16 +124,22 @@ impl Report {
             }
         };
         format!(
-            "max gouge {:.4} mm, residual max {:.4} / mean {:.4} mm, removed {:.1} mm3\nrapids in stock: {}\nout of travel: {}\nestimated time {} ({} lines)",
+            "max gouge {:.4} mm, residual max {:.4} / mean {:.4} mm, removed {:.1} mm3\n\
+             (against the relief's surface at cell centres {:.4} mm apart; a cut's bottom \
+             between them is at most {:.4} mm deeper)\n\
+             rapids in stock: {}\nout of travel: {}\nestimated time {} ({} lines)",
             self.max_gouge_mm,
             self.max_residual_mm,
             self.mean_residual_mm,
             self.removed_mm3,
+            self.cell_mm,
+            self.between_cells_mm,
             list(&self.rapids_in_stock),
             list(&self.out_of_travel),
             hms(self.time_s),
             self.lines
-        ) + "\n" + &self.engagement.summary()
+        ) + "\n"
+            + &self.engagement.summary()
     }
 }
 
@@ -557,23 +572,13 @@ pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
     t
 }
 
-/// The relief's height (mm, Z frame: 0 = top) at a point, bilinear between
-/// samples; None outside the relief.
+/// The relief's height (mm, Z frame: 0 = top) at a point, on the
+/// continuous surface the toolpaths cut against (`surface`); None outside
+/// the relief.
 pub fn target_at(r: &Relief, x: f64, y: f64) -> Option<f64> {
-    if x < 0.0 || y < 0.0 || x > r.width_mm || y > r.height_mm {
-        return None;
-    }
-    let (w, h) = (r.heights.w, r.heights.h);
-    let (px, py) = (r.width_mm / w as f64, r.height_mm / h as f64);
-    let fi = (x / px - 0.5).clamp(0.0, (w - 1) as f64);
-    let fj = ((r.height_mm - y) / py - 0.5).clamp(0.0, (h - 1) as f64);
-    let (i0, j0) = (fi.floor() as usize, fj.floor() as usize);
-    let (i1, j1) = ((i0 + 1).min(w - 1), (j0 + 1).min(h - 1));
-    let (tx, ty) = (fi - i0 as f64, fj - j0 as f64);
-    let z = |i: usize, j: usize| *r.heights.get(i, j) as f64;
-    let top = z(i0, j0) * (1.0 - tx) + z(i1, j0) * tx;
-    let bot = z(i0, j1) * (1.0 - tx) + z(i1, j1) * tx;
-    Some(top * (1.0 - ty) + bot * ty - r.depth_mm)
+    crate::surface::Lattice::of(r)
+        .height_at(x, y, |i, j| *r.heights.get(i, j) as f64)
+        .map(|z| z - r.depth_mm)
 }
 
 /// Compare the cut with the relief whose lower-left corner lies at `at`:

@@ -301,9 +301,79 @@ mod merge_tests {
 /// raises it (mm).
 pub const CHECK: f64 = 2e-4;
 
+/// How deep the straight move a -> b would cut into the relief's surface
+/// (<= 0 when it cuts none): the exact swept tool against every sample it
+/// passes, then the drop-cutter at probes between them (`probe_gouge`).
+pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
+    let at_samples = sample_gouge(hf, tool, a, b);
+    at_samples.max(probe_gouge(hf, tool, a, b, at_samples.max(0.5 * CHECK)))
+}
+
+/// The highest the CL surface rises above the move a -> b at probes where
+/// the surface between samples can hold the tool higher than the samples
+/// do: where the move's path crosses the lattice's cell edges and
+/// diagonals (where a pointed tool's CL surface has its creases), and
+/// midway between crossings more than half a sample apart. Only rises
+/// above `floor` count (the drop-cutter then prunes nearly everything).
+pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64) -> f64 {
+    let p = hf.pitch;
+    let (d, top) = (b - a, hf.top);
+    // every t in (0, 1) where a family of lines k p + offset is crossed by
+    // the linear function f(t) = f0 + t df
+    let mut ts: Vec<f64> = vec![0.0, 1.0];
+    let mut cross = |f0: f64, df: f64, offset: f64| {
+        if df.abs() < 1e-12 {
+            return;
+        }
+        let (lo, hi) = (f0.min(f0 + df), f0.max(f0 + df));
+        let k0 = ((lo - offset) / p).ceil() as i64;
+        let k1 = ((hi - offset) / p).floor() as i64;
+        for k in k0..=k1.min(k0 + 1_000_000) {
+            let t = (k as f64 * p + offset - f0) / df;
+            if t > 0.0 && t < 1.0 {
+                ts.push(t);
+            }
+        }
+    };
+    cross(a.x, d.x, 0.5 * p);
+    cross(top - a.y, -d.y, 0.5 * p);
+    cross(a.x + top - a.y, d.x - d.y, 0.0);
+    ts.sort_unstable_by(f64::total_cmp);
+    // between creases the CL surface is smooth, bent at most as the tip
+    // is: probes this far apart miss at most CHECK / 2 of a bulge
+    let spacing = match *tool {
+        Tool::Ball { d } => (2.0 * CHECK * d).sqrt(),
+        Tool::TaperBall { tip_r, .. } => (4.0 * CHECK * tip_r).sqrt(),
+        _ => f64::INFINITY,
+    }
+    .min(0.5 * p);
+    let len = d.truncate().length();
+    let mut probes: Vec<f64> = Vec::with_capacity(2 * ts.len());
+    for w in ts.windows(2) {
+        if w[0] > 0.0 {
+            probes.push(w[0]);
+        }
+        let n = ((w[1] - w[0]) * len / spacing).ceil() as usize;
+        for k in 1..n.min(1 << 20) {
+            probes.push(w[0] + (w[1] - w[0]) * k as f64 / n as f64);
+        }
+    }
+    let mut stack = Vec::new();
+    let mut hint = None;
+    let mut worst = f64::NEG_INFINITY;
+    for t in probes {
+        let q = a + d * t;
+        if let Some((z, c)) = hf.drop_above(tool, q.x, q.y, q.z + floor, hint, &mut stack) {
+            hint = Some(c);
+            worst = worst.max(z - q.z);
+        }
+    }
+    worst
+}
+
 /// How deep the straight move a -> b would cut below the samples it passes
 /// over (<= 0 when it cuts none), with the exact swept tool.
-pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
+fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
     use crate::sweep::{cells_between, Sweep};
     let sw = Sweep::new(a, b, *tool);
     let ball = matches!(tool, Tool::Ball { .. }).then(|| BallSweep::new(a, b, sw.r));
