@@ -1,32 +1,32 @@
 //! The relief as a watertight solid (binary STL) in the shared frame of
 //! DESIGN.md section 6: sample (i, j) at X = (i + 0.5) * pitch,
 //! Y = height - (j + 0.5) * pitch, Z = h - depth (top of the relief at 0),
-//! side walls and a flat bottom at Z = -depth - base.
+//! the top carried flat to the panel's edges, side walls and a flat
+//! bottom at Z = -depth - base.
 
 use crate::relief::Relief;
 use stl_io::{Normal, Triangle, Vertex};
 
-/// Vertex positions and outward-facing triangles of the solid.
+/// Vertex positions and outward-facing triangles of the solid: the top
+/// is the continuous surface the toolpaths cut (`surface::Lattice`), the
+/// samples joined by two triangles per cell and carried flat to the
+/// panel's edges.
 pub fn solid(r: &Relief, base_mm: f64) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let (w, h) = (r.heights.w, r.heights.h);
-    let (px, py) = (r.width_mm / w as f64, r.height_mm / h as f64);
+    let l = crate::surface::Lattice::of(r);
+    let (w, h) = (l.w + 2, l.h + 2);
     let bottom = (-r.depth_mm - base_mm) as f32;
-    let xy = |i: usize, j: usize| {
-        [
-            ((i as f64 + 0.5) * px) as f32,
-            (r.height_mm - (j as f64 + 0.5) * py) as f32,
-        ]
-    };
+    let xy = |i: usize, j: usize| [l.vx(i) as f32, l.vy(j) as f32];
     let mut v: Vec<[f32; 3]> = Vec::with_capacity(w * h + 2 * (w + h) + 1);
     for j in 0..h {
         for i in 0..w {
             let [x, y] = xy(i, j);
-            v.push([x, y, *r.heights.get(i, j) - r.depth_mm as f32]);
+            let (si, sj) = l.sample(i, j);
+            v.push([x, y, *r.heights.get(si, sj) - r.depth_mm as f32]);
         }
     }
     let mut t = Vec::with_capacity(2 * w * h + 8 * (w + h));
-    for j in 0..h.saturating_sub(1) {
-        for i in 0..w.saturating_sub(1) {
+    for j in 0..h - 1 {
+        for i in 0..w - 1 {
             let a = (j * w + i) as u32;
             let (b, c, d) = (a + 1, a + w as u32, a + w as u32 + 1);
             t.push([a, c, b]);
@@ -110,5 +110,15 @@ mod tests {
         assert!(volume > 0.0, "outward normals give a positive volume");
         // volume = base slab + the relief above the bottom of the depth
         assert!(volume > 10.0 * 8.0 * 1.0);
+        // the whole panel, to its edges
+        let (lo, hi) = v
+            .iter()
+            .fold(([f32::MAX; 2], [f32::MIN; 2]), |(lo, hi), p| {
+                (
+                    [lo[0].min(p[0]), lo[1].min(p[1])],
+                    [hi[0].max(p[0]), hi[1].max(p[1])],
+                )
+            });
+        assert_eq!((lo, hi), ([0.0, 0.0], [10.0, 8.0]));
     }
 }
