@@ -335,9 +335,13 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
             }
         }
     };
-    cross(a.x, d.x, 0.5 * p);
-    cross(top - a.y, -d.y, 0.5 * p);
-    cross(a.x + top - a.y, d.x - d.y, 0.0);
+    // a ball's or tapered tip's CL surface has no creases (each triangle
+    // holds it on a smooth surface): the curvature spacing alone will do
+    if matches!(tool, Tool::VBit { .. } | Tool::Flat { .. }) {
+        cross(a.x, d.x, 0.5 * p);
+        cross(top - a.y, -d.y, 0.5 * p);
+        cross(a.x + top - a.y, d.x - d.y, 0.0);
+    }
     ts.sort_unstable_by(f64::total_cmp);
     // between creases the CL surface is smooth, bent at most as the tip
     // is: probes this far apart miss at most CHECK / 2 of a bulge

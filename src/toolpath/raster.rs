@@ -88,7 +88,7 @@ pub fn drop_rows(
     floor: f64,
 ) -> Vec<Vec<DVec3>> {
     rows.par_iter()
-        .map(|row| drop_along(hf, tool, row, floor, Refine::Full))
+        .map(|row| drop_along(hf, tool, row, floor, Refine::Bounds))
         .collect()
 }
 
