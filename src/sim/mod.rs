@@ -124,11 +124,15 @@ impl Report {
             }
         };
         format!(
-            "max gouge {:.4} mm, residual max {:.4} / mean {:.4} mm, removed {:.1} mm3\n\
+            "max gouge {:.4} mm{}, residual max {:.4} / mean {:.4} mm, removed {:.1} mm3\n\
              (against the relief's surface at cell centres {:.4} mm apart; a cut's bottom \
              between them is at most {:.4} mm deeper)\n\
              rapids in stock: {}\nout of travel: {}\nestimated time {} ({} lines)",
             self.max_gouge_mm,
+            self.max_gouge_at_mm
+                .filter(|_| self.max_gouge_mm >= 5e-4)
+                .map(|(x, y)| format!(" at X{x:.2} Y{y:.2}"))
+                .unwrap_or_default(),
             self.max_residual_mm,
             self.mean_residual_mm,
             self.removed_mm3,
