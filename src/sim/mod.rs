@@ -576,16 +576,8 @@ pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
     t
 }
 
-/// The relief's height (mm, Z frame: 0 = top) at a point, on the
-/// continuous surface the toolpaths cut against (`surface`); None outside
-/// the relief.
-pub fn target_at(r: &Relief, x: f64, y: f64) -> Option<f64> {
-    crate::surface::Lattice::of(r)
-        .height_at(x, y, |i, j| *r.heights.get(i, j) as f64)
-        .map(|z| z - r.depth_mm)
-}
-
-/// Compare the cut with the relief whose lower-left corner lies at `at`:
+/// Compare the cut with the relief whose lower-left corner lies at `at`,
+/// on the continuous surface the toolpaths cut against (`surface`):
 /// (max gouge, max residual, mean residual, deviation per cell).
 pub fn deviation(
     stock: &Stock,
@@ -593,6 +585,12 @@ pub fn deviation(
     relief: &Relief,
     at: (f64, f64),
 ) -> (f64, f64, f64, Grid<f32>) {
+    let lattice = crate::surface::Lattice::of(relief);
+    let target = |x: f64, y: f64| {
+        lattice
+            .height_at(x, y, |i, j| *relief.heights.get(i, j) as f64)
+            .map(|z| z - relief.depth_mm)
+    };
     let mut dev = Grid::new(cut.w, cut.h, f32::NAN);
     dev.data
         .par_chunks_mut(cut.w)
@@ -600,7 +598,7 @@ pub fn deviation(
         .for_each(|(j, row)| {
             for (i, d) in row.iter_mut().enumerate() {
                 let (x, y) = stock.centre(i, j);
-                if let Some(t) = target_at(relief, x - at.0, y - at.1) {
+                if let Some(t) = target(x - at.0, y - at.1) {
                     *d = (*cut.get(i, j) as f64 - t) as f32;
                 }
             }

@@ -126,11 +126,6 @@ impl HeightField {
         )
     }
 
-    /// Height of the surface at (x, y); None off the panel.
-    pub fn height_at(&self, x: f64, y: f64) -> Option<f64> {
-        self.lattice.height_at(x, y, |i, j| *self.samples.get(i, j))
-    }
-
     /// Squared distance from (x, y) to the rectangle of block (bx, by) at `level`,
     /// or less: the rectangle is taken unclamped to the panel (wider at
     /// its edges), which is cheaper and still a bound.
@@ -161,63 +156,26 @@ impl HeightField {
         z.is_finite().then_some(z)
     }
 
-    /// Cell (i, j)'s contact when it may beat `best`, else at most
-    /// `best`. Its corners are exact contacts; inside a triangle whose
-    /// corners are all in reach the tool can sink below the best corner
-    /// by at most the Jensen gap of its profile, curvature x diameter^2
-    /// / 8, so the exact contact is computed only when that could tell.
-    #[inline]
+    /// The cells of the block of `side` x `side` cells (1 or 2) from cell
+    /// `first`: their corners' contacts computed once, then each cell's
+    /// exact contact only where it may beat `best`. Inside a triangle
+    /// whose corners are all in reach the tool can sink below the best
+    /// corner by at most the Jensen gap of its profile, curvature x
+    /// diameter^2 / 8; a cell at the rim is bounded by its highest corner.
     #[allow(clippy::too_many_arguments)]
-    fn leaf(&self, tool: &Tool, r: f64, i: usize, j: usize, x: f64, y: f64, best: f64) -> f64 {
-        let l = &self.lattice;
-        let (x0, x1, yt, yb) = (l.vx(i), l.vx(i + 1), l.vy(j), l.vy(j + 1));
-        let w = self.vz.w;
-        let k = j * w + i;
-        let (dx0, dx1, dyt, dyb) = (x0 - x, x1 - x, yt - y, yb - y);
-        let corners = [
-            (dx0 * dx0 + dyt * dyt, self.vz.data[k]),
-            (dx1 * dx1 + dyt * dyt, self.vz.data[k + 1]),
-            (dx0 * dx0 + dyb * dyb, self.vz.data[k + w]),
-            (dx1 * dx1 + dyb * dyb, self.vz.data[k + w + 1]),
-        ];
-        let far2 = corners.iter().fold(0.0f64, |m, c| m.max(c.0));
-        let top = corners
-            .iter()
-            .filter(|c| c.0 <= r * r)
-            .map(|&(d2, z)| z - tool.profile(d2.sqrt()))
-            .fold(f64::NEG_INFINITY, f64::max);
-        if best == f64::INFINITY {
-            return top;
-        }
-        if far2 > r * r {
-            return self.cell_contact(tool, r, i, j, x, y, best);
-        }
-        let dx = dx0.max(0.0).max(-dx1);
-        let dy = dyb.max(0.0).max(-dyt);
-        let near = (dx * dx + dy * dy).sqrt();
-        let diam2 = (x1 - x0) * (x1 - x0) + (yt - yb) * (yt - yb);
-        if top + tool.curvature_bound(near, far2.sqrt()) * diam2 / 8.0 <= best {
-            return top;
-        }
-        self.cell_contact(tool, r, i, j, x, y, best)
-    }
-
-    /// The 2 x 2 cells of level-1 block `b`: their 3 x 3 corners' contacts
-    /// computed once, then each cell's exact contact only where its
-    /// corners and curvature (as in `leaf`) or, at the rim, its highest
-    /// corner say it may beat `best`.
-    fn quad(
+    fn cells(
         &self,
         tool: &Tool,
         r: f64,
-        b: (usize, usize),
+        first: (usize, usize),
+        side: usize,
         (x, y): (f64, f64),
         best: &mut f64,
         contact: &mut (usize, usize),
     ) {
         let (cw, ch) = self.lattice.cells();
-        let (i0, j0) = (2 * b.0, 2 * b.1);
-        let (ni, nj) = ((cw - i0).min(2), (ch - j0).min(2));
+        let (i0, j0) = first;
+        let (ni, nj) = ((cw - i0).min(side), (ch - j0).min(side));
         let l = &self.lattice;
         let w = self.vz.w;
         let r2 = r * r;
@@ -415,15 +373,9 @@ impl HeightField {
             if bound <= best {
                 continue;
             }
-            if level == 0 {
-                let z = self.leaf(tool, r, bx, by, x, y, best);
-                if z > best {
-                    (best, contact) = (z, (bx, by));
-                }
-                continue;
-            }
-            if level == 1 {
-                self.quad(tool, r, (bx, by), (x, y), &mut best, &mut contact);
+            if level <= 1 {
+                let first = (bx << level, by << level);
+                self.cells(tool, r, first, 1 << level, (x, y), &mut best, &mut contact);
                 continue;
             }
             // children, most promising last so they are searched first
@@ -669,6 +621,9 @@ mod tests {
             "taperball:0.2:8:2.4",
             "vbit:60:2",
             "vbit:90:3",
+            // smaller than a sample: the search starts at single cells
+            "ball:0.08",
+            "flat:0.09",
         ];
         // reliefs of 128 to 512 px with waves, noise and a step outline
         for (w, h, pitch, seed, rough) in [(128, 96, 0.1, 1, true), (512, 40, 0.05, 2, false)] {
