@@ -191,7 +191,7 @@ impl ReliefJob {
         };
         let dm = t.time("rasterize", || {
             scene::render(&mesh, &self.camera, self.resolution, 2)
-        });
+        })?;
         if dm.id.data.iter().all(|&i| i == 0) {
             bail!("{}: nothing visible from this view", self.model_name());
         }

@@ -64,18 +64,24 @@ const BUILTIN: [(&str, &str); 3] = [
 impl Machine {
     /// A shipped profile by name, or a TOML file by path.
     pub fn load(name_or_path: &str) -> Result<Machine> {
-        let m: Machine = if let Some((_, text)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
-            toml::from_str(text).ctx(format!("machines/{name_or_path}.toml"))?
+        if let Some((_, text)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
+            Machine::parse(text, &format!("machines/{name_or_path}.toml"))
         } else if Path::new(name_or_path).is_file() {
             let text = std::fs::read_to_string(name_or_path).ctx(name_or_path)?;
-            toml::from_str(&text).ctx(name_or_path)?
+            Machine::parse(&text, name_or_path)
         } else {
             let names: Vec<&str> = BUILTIN.iter().map(|b| b.0).collect();
             bail!(
                 "--machine {name_or_path}: no such profile or file; shipped: {}",
                 names.join(", ")
             );
-        };
+        }
+    }
+
+    /// A profile from its TOML text, every number checked; `name_or_path`
+    /// names it in errors.
+    pub fn parse(text: &str, name_or_path: &str) -> Result<Machine> {
+        let m: Machine = toml::from_str(text).ctx(name_or_path)?;
         let pos = |v: f64| v.is_finite() && v > 0.0;
         for k in 0..3 {
             if !pos(m.travel.get(k)) || !pos(m.max_rate.get(k)) || !pos(m.acceleration.get(k)) {

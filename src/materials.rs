@@ -66,10 +66,47 @@ struct File {
 
 /// All built-in materials by name.
 pub fn builtin() -> BTreeMap<String, Material> {
-    toml::from_str::<File>(BUILTIN)
-        .ctx("machines/materials.toml")
-        .expect("built-in materials parse")
-        .materials
+    parse(BUILTIN, "machines/materials.toml").expect("built-in materials parse")
+}
+
+/// Materials from TOML text, every number checked to be finite and in
+/// range; `what` names the text in errors.
+pub fn parse(text: &str, what: &str) -> Result<BTreeMap<String, Material>> {
+    let all = toml::from_str::<File>(text).ctx(what)?.materials;
+    let within = |v: f64, lo: f64, hi: f64| v.is_finite() && v >= lo && v <= hi;
+    for (name, m) in &all {
+        let ok = within(m.depth_per_100mm, 0.01, 100.0)
+            && m.bands.len() <= 16
+            && m.bands.iter().all(|&g| within(g, 0.0, 100.0))
+            && m.alpha.is_none_or(|a| within(a, 0.0, 1e6));
+        if !ok {
+            bail!(
+                "{what}: material {name}: depth_per_100mm must be within 0.01..100, \
+                 at most 16 bands within 0..100, alpha within 0..1e6"
+            );
+        }
+        for c in &m.cutting {
+            let ok = within(c.d, 0.01, 100.0)
+                && [c.feed, c.plunge, c.rpm]
+                    .iter()
+                    .all(|&v| within(v, 1e-3, 1e6))
+                && [c.step_down, c.slot_depth]
+                    .iter()
+                    .all(|&v| within(v, 1e-3, 100.0))
+                && [c.rough_stepover, c.finish_stepover]
+                    .iter()
+                    .all(|&v| within(v, 0.1, 100.0));
+            if !ok {
+                bail!(
+                    "{what}: material {name}: cutting entry for d = {} mm: d within 0.01..100 mm, \
+                     feed, plunge and rpm within 0.001..1e6, step_down and slot_depth within \
+                     0.001..100 mm, stepovers within 0.1..100 %",
+                    c.d
+                );
+            }
+        }
+    }
+    Ok(all)
 }
 
 /// One material by name (case-insensitive; "aluminum" is accepted).

@@ -75,6 +75,14 @@ fn each_bad_input_fails_cleanly() {
         "--resolution 100000",
     );
     fails(&d, &[&spot, "--resolution", "-3"], "--resolution");
+    // within the long-side limit but past the pixel limit (16384 px of the
+    // demo took 10 GB): refused before rendering, with the size that fits
+    fails(
+        &d,
+        &["--resolution", "16384"],
+        "--resolution 16384: the relief would be 16384 x 9732 = 159.4 million pixels, \
+         more than the 67.1 million allowed (memory); use --resolution 10628 or less",
+    );
     fails(&d, &[&spot, "--bands", "2,x"], "--bands");
     fails(&d, &[&spot, "--material", "unobtainium"], "unobtainium");
     fails(&d, &[&spot, "--depth", "-1"], "--depth");
@@ -304,5 +312,53 @@ fn hostile_numbers_in_files_fail_cleanly() {
         fails_with(&args, names);
         assert!(!out.exists() && !cut.exists());
     }
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// A 60 MB binary STL of 1.2 million triangles (it took more than 30 s to
+/// make a 64 px relief) makes a 512 px relief; its speed is measured by
+/// `bench/large-stl` (0.7 s), here only that it finishes.
+#[test]
+fn a_million_triangle_stl_makes_a_relief() {
+    let d = scratch("big-stl");
+    let stl = d.join("big.stl");
+    // a wavy 775 x 775 vertex sheet: 2 x 774 x 774 = 1,198,152 triangles
+    let n = 775usize;
+    let p = |i: usize, j: usize| {
+        let (x, y) = (
+            i as f32 / (n - 1) as f32 * 2.0 - 1.0,
+            j as f32 / (n - 1) as f32 * 2.0 - 1.0,
+        );
+        [x, y, 0.3 * (3.0 * x).cos() * (2.0 * y).sin()]
+    };
+    let count = 2 * (n - 1) * (n - 1);
+    let mut b = Vec::with_capacity(84 + 50 * count);
+    b.extend([0u8; 80]);
+    b.extend((count as u32).to_le_bytes());
+    for i in 0..n - 1 {
+        for j in 0..n - 1 {
+            let (a, bb, c, e) = (p(i, j), p(i + 1, j), p(i, j + 1), p(i + 1, j + 1));
+            for t in [[a, bb, c], [bb, e, c]] {
+                b.extend([0u8; 12]);
+                t.iter().flatten().for_each(|v| b.extend(v.to_le_bytes()));
+                b.extend([0u8; 2]);
+            }
+        }
+    }
+    assert_eq!(b.len(), 84 + 50 * count);
+    std::fs::write(&stl, &b).unwrap();
+    let out = d.join("r.png");
+    ok(&run(&[
+        "relief",
+        stl.to_str().unwrap(),
+        "--resolution",
+        "512",
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]));
+    let (w, h, v) = read_png16(&out);
+    assert_eq!(w.max(h), 512);
+    assert!(v.iter().filter(|&&x| x > 0).count() > w * h / 2);
     std::fs::remove_dir_all(d).unwrap();
 }

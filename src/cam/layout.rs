@@ -224,9 +224,13 @@ impl Frame {
                 }
                 Some((&what, rest)) => {
                     for w in rest {
-                        let (c, num) = w.split_at(1);
+                        let Some(c) = w.chars().next() else {
+                            return Err(bad());
+                        };
+                        let num = &w[c.len_utf8()..];
                         let x: f64 = num.parse().map_err(|_| bad())?;
-                        if !x.is_finite() {
+                        // within a 100 m machine
+                        if !(x.is_finite() && x.abs() <= 1e5) {
                             return Err(bad());
                         }
                         v.insert(format!("{what}{c}"), x);
@@ -248,7 +252,8 @@ impl Frame {
             z_bottom: z_bottom.ok_or_else(bad)?,
         };
         let (_, _, w, h, t) = f.stock;
-        if !(w > 0.0 && h > 0.0 && t > 0.0) {
+        // sizes as --stock accepts them
+        if ![w, h, t].iter().all(|s| (1e-3..=1e4).contains(s)) {
             return Err(bad());
         }
         Ok(Some(f))

@@ -87,34 +87,50 @@ pub const MAX_PIXELS: usize = 1 << 26;
 /// the header alone).
 pub fn decode(path: &Path) -> Result<image::DynamicImage> {
     let what = path.display().to_string();
-    let open = || {
-        image::ImageReader::open(path)
-            .ctx(&what)?
-            .with_guessed_format()
-            .ctx(&what)
-    };
-    let (w, h) = open()?.into_dimensions().ctx(&what)?;
+    decode_with(|| image::ImageReader::open(path).ctx(&what), &what)
+}
+
+/// `decode` of an image held in memory.
+pub fn decode_bytes(bytes: &[u8], what: &str) -> Result<image::DynamicImage> {
+    decode_with(
+        || Ok(image::ImageReader::new(std::io::Cursor::new(bytes))),
+        what,
+    )
+}
+
+/// `open` is called twice: once for the header, once to decode.
+fn decode_with<R: std::io::BufRead + std::io::Seek>(
+    open: impl Fn() -> Result<image::ImageReader<R>>,
+    what: &str,
+) -> Result<image::DynamicImage> {
+    let guessed = || open()?.with_guessed_format().ctx(what);
+    let (w, h) = guessed()?.into_dimensions().ctx(what)?;
     let (w, h) = (w as usize, h as usize);
     if w < 2 || h < 2 || w * h > MAX_PIXELS {
         bail!(
             "{what}: image of {w} x {h} pixels is out of range (2 x 2 up to {MAX_PIXELS} pixels)"
         );
     }
-    open()?.decode().ctx(&what)
+    guessed()?.decode().ctx(what)
 }
 
 /// A grayscale PNG as values in [0, 1] (8 or 16 bit).
 pub fn read_gray(path: &Path) -> Result<Grid<f32>> {
-    let g = decode(path)?.into_luma16();
+    Ok(gray(decode(path)?))
+}
+
+/// An image's luminance as values in [0, 1].
+pub fn gray(img: image::DynamicImage) -> Grid<f32> {
+    let g = img.into_luma16();
     let (w, h) = (g.width() as usize, g.height() as usize);
-    Ok(Grid::from_vec(
+    Grid::from_vec(
         w,
         h,
         g.into_raw()
             .into_iter()
             .map(|v| v as f32 / 65535.0)
             .collect(),
-    ))
+    )
 }
 
 /// Load a relief: the sidecar gives its size; a plain heightmap needs
@@ -123,19 +139,32 @@ pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result
     let what = path.display().to_string();
     let g = read_gray(path)?;
     let side_path = sidecar_path(path);
-    let side: Option<Sidecar> = if side_path.exists() {
-        let text = std::fs::read_to_string(&side_path).ctx(side_path.display())?;
-        Some(serde_json::from_str(&text).ctx(side_path.display())?)
+    let side = if side_path.exists() {
+        Some(std::fs::read_to_string(&side_path).ctx(side_path.display())?)
     } else {
         None
     };
+    let side_name = side_path.display().to_string();
+    relief_from(g, side.as_deref(), &side_name, width_mm, depth_mm, &what)
+}
+
+/// A relief from its decoded heights and its sidecar's text (if there is
+/// one), the flags overriding the sidecar.
+pub fn relief_from(
+    g: Grid<f32>,
+    side: Option<&str>,
+    side_name: &str,
+    width_mm: Option<f64>,
+    depth_mm: Option<f64>,
+    what: &str,
+) -> Result<Relief> {
+    let side: Option<Sidecar> = side
+        .map(|text| serde_json::from_str(text).ctx(side_name))
+        .transpose()?;
     let width = width_mm.or(side.as_ref().map(|s| s.width_mm));
     let depth = depth_mm.or(side.as_ref().map(|s| s.depth_mm));
     let (Some(width), Some(depth)) = (width, depth) else {
-        bail!(
-            "{what}: no sidecar {}; give --width and --depth in mm",
-            side_path.display()
-        );
+        bail!("{what}: no sidecar {side_name}; give --width and --depth in mm");
     };
     // a panel from a hundredth of a millimetre to 10 m, a relief as deep
     if !((1e-2..=1e4).contains(&width) && (1e-3..=1e4).contains(&depth)) {

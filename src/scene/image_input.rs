@@ -14,7 +14,16 @@ pub enum ImageModel {
 }
 
 pub fn load_png(path: &Path) -> Result<ImageModel> {
-    let img = decode(path)?;
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().to_string())
+        .unwrap_or_default();
+    Ok(image_model(decode(path)?, name))
+}
+
+/// A decoded image as a model: gray is depth, colour a normal map. `name`
+/// names the depth map's one object.
+pub fn image_model(img: image::DynamicImage, name: String) -> ImageModel {
     let (w, h) = (img.width() as usize, img.height() as usize);
     let gray = !img.color().has_color()
         || img
@@ -30,15 +39,11 @@ pub fn load_png(path: &Path) -> Result<ImageModel> {
             .collect();
         let hgrid = Grid::from_vec(w, h, h_data);
         let id = hgrid.map(|v| (*v > 0.0) as u16);
-        let name = path
-            .file_stem()
-            .map(|s| s.to_string_lossy().to_string())
-            .unwrap_or_default();
-        return Ok(ImageModel::Depth(DepthMap {
+        return ImageModel::Depth(DepthMap {
             h: hgrid,
             id,
             objects: vec![name],
-        }));
+        });
     }
     // Normal map: n = 2c - 1; slope = -n_xy / n_z in image-width units (the
     // surface is taken as isotropic: depth measured in pixels like x and y).
@@ -59,5 +64,5 @@ pub fn load_png(path: &Path) -> Result<ImageModel> {
         gy.data[i] = ny / nz;
         mask.data[i] = true;
     }
-    Ok(ImageModel::Slopes(SlopeSource { gx, gy, mask }))
+    ImageModel::Slopes(SlopeSource { gx, gy, mask })
 }
