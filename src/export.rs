@@ -65,6 +65,13 @@ pub fn solid(r: &Relief, base_mm: f64) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 
 /// Binary STL bytes of the solid.
 pub fn stl_bytes(r: &Relief, base_mm: f64) -> Vec<u8> {
+    let mut out = Vec::new();
+    write_stl(r, base_mm, &mut out).expect("writing STL into memory cannot fail");
+    out
+}
+
+/// The solid as binary STL, streamed to `out`.
+pub fn write_stl(r: &Relief, base_mm: f64, out: &mut dyn std::io::Write) -> std::io::Result<()> {
     let (v, t) = solid(r, base_mm);
     let tris = t.iter().map(|f| {
         let [a, b, c] = f.map(|i| glam::Vec3::from(v[i as usize]));
@@ -74,9 +81,7 @@ pub fn stl_bytes(r: &Relief, base_mm: f64) -> Vec<u8> {
             vertices: [a, b, c].map(|p| Vertex::new(p.into())),
         }
     });
-    let mut out = Vec::new();
-    stl_io::write_stl(&mut out, tris).expect("writing STL into memory cannot fail");
-    out
+    stl_io::write_stl(&mut { out }, tris)
 }
 
 #[cfg(test)]

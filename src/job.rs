@@ -13,6 +13,21 @@ use crate::timing::Timings;
 use crate::{export, materials, preview};
 use std::path::PathBuf;
 
+/// Most pixels a relief may have, and why: 2^26 (the demo at 10628 px:
+/// 28 s, 4.2 GB); with a flat background 2^25, as its iterative solver
+/// holds about 125 bytes a pixel (the demo at 4096 px with steps, bands
+/// and emphasis: 1.25 GB).
+pub fn pixel_limit(p: &Params) -> (usize, &'static str) {
+    if p.flat_background {
+        (
+            file::MAX_PIXELS / 2,
+            "--flat-background takes (its solver's memory; the free background takes twice as many)",
+        )
+    } else {
+        (file::MAX_PIXELS, "allowed (memory)")
+    }
+}
+
 /// Longest side accepted for `--resolution` (pixels).
 pub const MAX_RESOLUTION: usize = 16384;
 
@@ -180,6 +195,19 @@ impl ReliefJob {
         if is_png {
             let path = self.model.as_ref().unwrap();
             let img = t.time("load", || load_png(path))?;
+            let (w, h) = match &img {
+                ImageModel::Depth(d) => (d.h.w, d.h.h),
+                ImageModel::Slopes(s) => (s.gx.w, s.gx.h),
+            };
+            let (max, why) = pixel_limit(p);
+            if w * h > max {
+                bail!(
+                    "{}: {w} x {h} = {:.1} million pixels, more than the {:.1} million {why}",
+                    path.display(),
+                    (w * h) as f64 / 1e6,
+                    max as f64 / 1e6
+                );
+            }
             return Ok(t.time("gradients", || match &img {
                 ImageModel::Depth(d) => (shape_field(d, 1, shaping), d.objects.clone()),
                 ImageModel::Slopes(s) => (shape_field(s, 1, shaping), Vec::new()),
@@ -190,7 +218,7 @@ impl ReliefJob {
             None => t.time("load", scene::demo::scene),
         };
         let dm = t.time("rasterize", || {
-            scene::render(&mesh, &self.camera, self.resolution, 2)
+            scene::render(&mesh, &self.camera, self.resolution, 2, pixel_limit(p))
         })?;
         if dm.id.data.iter().all(|&i| i == 0) {
             bail!("{}: nothing visible from this view", self.model_name());
@@ -257,6 +285,20 @@ impl ReliefJob {
         stage("integrating");
         let relief = relief::build(&field, &params, &stencils, &mut t)?;
         stage("writing");
+        let depth_png = self.depth_out.as_ref().map(|_| {
+            t.time("encode", || {
+                let mut d = field
+                    .depth
+                    .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16);
+                if self.mirror {
+                    d.flip_x();
+                }
+                file::png16(&d)
+            })
+        });
+        // the field is 30 bytes a pixel: gone before the outputs are made
+        let silhouette_edges = field.silhouette_edges;
+        drop((field, stencils));
         let mut out = Outputs::default();
         let meta = serde_json::json!({
             "model": self.model_name(),
@@ -272,19 +314,14 @@ impl ReliefJob {
             out.add(&self.output, png);
             out.add(&file::sidecar_path(&self.output), json);
             if let Some(p) = &self.stl {
-                out.add(p, export::stl_bytes(&relief, self.base_mm));
+                let (relief, base) = (&relief, self.base_mm);
+                out.add_stream(p, Box::new(move |w| export::write_stl(relief, base, w)));
             }
             if let Some(p) = &self.preview {
                 out.add(p, file::png8(&preview::shade(&relief)));
             }
-            if let Some(p) = &self.depth_out {
-                let mut d = field
-                    .depth
-                    .map(|v| (v.clamp(0.0, 1.0) * 65535.0).round() as u16);
-                if self.mirror {
-                    d.flip_x();
-                }
-                out.add(p, file::png16(&d));
+            if let (Some(p), Some(png)) = (&self.depth_out, depth_png) {
+                out.add(p, png);
             }
             Ok(())
         })?;
@@ -300,7 +337,7 @@ impl ReliefJob {
             relief,
             params,
             timings: t,
-            silhouette_edges: field.silhouette_edges,
+            silhouette_edges,
             written,
         })
     }

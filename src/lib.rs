@@ -6,6 +6,7 @@ pub mod cam;
 pub mod error;
 pub mod export;
 pub mod grid;
+pub mod input;
 pub mod job;
 pub mod materials;
 pub mod output;

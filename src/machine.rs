@@ -67,7 +67,7 @@ impl Machine {
         if let Some((_, text)) = BUILTIN.iter().find(|(n, _)| *n == name_or_path) {
             Machine::parse(text, &format!("machines/{name_or_path}.toml"))
         } else if Path::new(name_or_path).is_file() {
-            let text = std::fs::read_to_string(name_or_path).ctx(name_or_path)?;
+            let text = crate::input::read_text(Path::new(name_or_path), crate::input::MAX_TEXT)?;
             Machine::parse(&text, name_or_path)
         } else {
             let names: Vec<&str> = BUILTIN.iter().map(|b| b.0).collect();

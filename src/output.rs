@@ -6,9 +6,19 @@ use crate::bail;
 use crate::error::Result;
 use std::path::{Path, PathBuf};
 
+/// Writes a file's content into its temporary file: a large output (the
+/// STL of a 67 million pixel relief is 6.7 GB) goes to disk as it is made
+/// instead of being held.
+pub type Writer<'a> = Box<dyn FnOnce(&mut dyn std::io::Write) -> std::io::Result<()> + 'a>;
+
+enum Content<'a> {
+    Bytes(Vec<u8>),
+    Stream(Writer<'a>),
+}
+
 #[derive(Default)]
-pub struct Outputs {
-    files: Vec<(PathBuf, Vec<u8>)>,
+pub struct Outputs<'a> {
+    files: Vec<(PathBuf, Content<'a>)>,
 }
 
 fn temp_path(p: &Path) -> PathBuf {
@@ -39,28 +49,43 @@ pub fn check_writable(path: &Path) -> Result<()> {
     Ok(())
 }
 
-impl Outputs {
+impl<'a> Outputs<'a> {
     pub fn add(&mut self, path: &Path, bytes: Vec<u8>) {
-        self.files.push((path.to_path_buf(), bytes));
+        self.files.push((path.to_path_buf(), Content::Bytes(bytes)));
+    }
+
+    /// A file whose content `write` streams out when the outputs commit.
+    pub fn add_stream(&mut self, path: &Path, write: Writer<'a>) {
+        self.files
+            .push((path.to_path_buf(), Content::Stream(write)));
     }
 
     /// Write everything or nothing.
     pub fn commit(self) -> Result<()> {
         let mut written: Vec<PathBuf> = Vec::new();
         let cleanup = |w: &[PathBuf]| w.iter().for_each(|t| drop(std::fs::remove_file(t)));
-        for (path, bytes) in &self.files {
-            let tmp = temp_path(path);
-            if let Err(e) = std::fs::write(&tmp, bytes) {
+        let paths: Vec<PathBuf> = self.files.iter().map(|f| f.0.clone()).collect();
+        for (path, content) in self.files {
+            let tmp = temp_path(&path);
+            let result = match content {
+                Content::Bytes(bytes) => std::fs::write(&tmp, bytes),
+                Content::Stream(write) => std::fs::File::create(&tmp).and_then(|f| {
+                    let mut w = std::io::BufWriter::with_capacity(1 << 20, f);
+                    write(&mut w)?;
+                    std::io::Write::flush(&mut w)
+                }),
+            };
+            if let Err(e) = result {
                 cleanup(&written);
                 drop(std::fs::remove_file(&tmp));
                 bail!("{}: cannot write: {e}", path.display());
             }
             written.push(tmp);
         }
-        for (k, (path, _)) in self.files.iter().enumerate() {
+        for (k, path) in paths.iter().enumerate() {
             if let Err(e) = std::fs::rename(&written[k], path) {
                 cleanup(&written[k..]);
-                for (p, _) in &self.files[..k] {
+                for p in &paths[..k] {
                     drop(std::fs::remove_file(p));
                 }
                 bail!("{}: cannot write: {e}", path.display());

@@ -3,7 +3,7 @@
 
 use crate::bail;
 use crate::cam::layout::Frame;
-use crate::error::{Context, Result};
+use crate::error::Result;
 use crate::gcode;
 use crate::grid::Grid;
 use crate::machine::Machine;
@@ -96,6 +96,8 @@ fn deviation_png(dev: &Grid<f32>, gouge: f64, residual: f64) -> Vec<u8> {
 pub const BETWEEN_CELLS: f64 = 1e-3;
 /// Most stock cells per relief pixel along each axis.
 pub const MAX_OVERSAMPLE: usize = 15;
+/// Most stock cells taken (two grids of f32 besides the job: 1 GiB).
+pub const MAX_CELLS: usize = 1 << 27;
 /// Most stock cells an automatic choice makes.
 const AUTO_CELLS: usize = 1 << 25;
 
@@ -152,9 +154,9 @@ impl SimulateJob {
         let mut frame = None;
         for job in &self.jobs {
             let what = job.display().to_string();
-            let text = t.time("read job", || std::fs::read(job)).ctx(&what)?;
-            let text = String::from_utf8(text)
-                .map_err(|_| crate::Error(format!("{what}: not a text file")))?;
+            let text = t.time("read job", || {
+                crate::input::read_text(job, crate::input::MAX_FILE)
+            })?;
             let f = Frame::find(&text).map_err(|e| crate::Error(format!("{what}: {e}")))?;
             // a file placed by its own frame (a tile, say) moves into the
             // first file's coordinates
@@ -231,39 +233,46 @@ impl SimulateJob {
         // cells on the relief's samples, once per relief pixel or oversampled
         .aligned_to(panel_at.0, panel_at.1 + relief.height_mm);
         let (w, h) = stock.cells();
-        if w * h > 1 << 28 {
-            bail!("--stock/--oversample: {w} x {h} cells is too many");
+        if w.saturating_mul(h) > MAX_CELLS {
+            bail!(
+                "--stock/--oversample: {w} x {h} cells, more than the {} million taken \
+                 (memory); lower --oversample or --stock",
+                MAX_CELLS >> 20
+            );
         }
         let mut cut = Grid::new(w, h, 0.0f32);
         let mut engagement = sim::Engagement::default();
         let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
         let mut last_tool = None;
         let travel_origin = self.travel_origin.unwrap_or((x0, y0));
-        for (what, job, offset) in &progs {
-            let prog = job.moved(*offset - glam::DVec3::new(0.0, 0.0, z_shift));
-            let (r, moves, runs) = t
-                .time("cut", || {
-                    sim::cut_program_measured(&stock, &mut cut, &prog, tool)
-                })
-                .map_err(|e| crate::Error(format!("{what}: {e}")))?;
-            last_tool = Some(runs[runs.len() - 1].2);
-            engagement.absorb(sim::Engagement::measure(&prog, &moves, &runs, stock.pitch));
-            // lines are numbered per file; a second file's follow on
-            rapids.extend(r.iter().map(|n| n + lines));
-            // a file moved into the first one's frame (a tile) has the
+        for (what, prog, offset) in progs.iter_mut() {
+            // the machine's travel is judged on the moves as written; a
+            // file moved into the first one's frame (a tile) has the
             // machine's travel where its own moves begin
             let origin = if *offset == glam::DVec3::ZERO || self.travel_origin.is_some() {
                 travel_origin
             } else {
-                let (lo, _) = job.bounds();
+                let (lo, _) = prog.bounds();
                 (lo.x, lo.y)
             };
             out_of_travel.extend(
-                sim::out_of_travel(job, &machine, origin)
+                sim::out_of_travel(prog, &machine, origin)
                     .iter()
                     .map(|n| n + lines),
             );
-            time_s += t.time("time estimate", || sim::estimate_time(&prog, &machine));
+            // then shifted in place (a copy of a 30 million move job is 2 GB)
+            prog.shift(*offset - glam::DVec3::new(0.0, 0.0, z_shift));
+            let prog = &*prog;
+            let (r, moves, runs) = t
+                .time("cut", || {
+                    sim::cut_program_measured(&stock, &mut cut, prog, tool)
+                })
+                .map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            last_tool = Some(runs[runs.len() - 1].2);
+            engagement.absorb(sim::Engagement::measure(prog, &moves, &runs, stock.pitch));
+            // lines are numbered per file; a second file's follow on
+            rapids.extend(r.iter().map(|n| n + lines));
+            time_s += t.time("time estimate", || sim::estimate_time(prog, &machine));
             lines += prog.lines;
         }
         let tool = last_tool.expect("at least one job");

@@ -267,9 +267,10 @@ impl Limits {
 const MIN_STEPOVER: f64 = 1e-3;
 
 /// The most cutter-location points a finishing pass may take (about a
-/// minute of dropping on two cores); past it the job is refused with the
-/// figure.
-const MAX_CL_POINTS: f64 = 2e8;
+/// minute of dropping on two cores, 0.7 GB held): a job never comes to
+/// more moves than `simulate` reads (gcode::MAX_SEGMENTS). Past it the job
+/// is refused with the figure.
+const MAX_CL_POINTS: f64 = crate::gcode::MAX_SEGMENTS as f64;
 
 /// Size of the touch-off pad left by roughing, mm (a square).
 const PAD: f64 = 8.0;

@@ -63,11 +63,16 @@ impl Program {
     /// The moves shifted by `d`: a job seen from another origin.
     pub fn moved(&self, d: DVec3) -> Program {
         let mut p = self.clone();
-        for s in &mut p.segments {
+        p.shift(d);
+        p
+    }
+
+    /// `moved` in place.
+    pub fn shift(&mut self, d: DVec3) {
+        for s in &mut self.segments {
             s.a += d;
             s.b += d;
         }
-        p
     }
 }
 
@@ -78,23 +83,41 @@ pub const MAX_ARC_RADIUS: f64 = 10_000.0;
 /// Largest chord error when arcs are broken into straight moves (mm).
 pub const ARC_TOLERANCE: f64 = 1e-4;
 
-/// Interpret `text`. Errors name the line.
+/// Most straight moves a program may come to (arcs counted in chords):
+/// about 2.4 GB as segments, and as many again as the simulator's
+/// per-move record.
+pub const MAX_SEGMENTS: usize = 30_000_000;
+
+/// Interpret `text`. Errors name the line. Lines are parsed twice (the
+/// first pass finds the highest Z, where the tool is taken to start)
+/// rather than held, so that memory follows the moves, not the text.
 pub fn program(text: &str) -> Result<Program> {
-    let lines = parse::parse(text)?;
-    let max_z = lines
-        .iter()
-        .flat_map(|l| l.words.iter())
-        .filter(|w| w.0 == 'Z')
-        .map(|w| w.1)
-        .fold(0.0f64, f64::max);
+    let mut max_z = 0.0f64;
+    let mut count = 0;
+    for (k, l) in text.lines().enumerate() {
+        let line = parse::parse_line(l, k + 1)?;
+        for w in line.words.iter().filter(|w| w.0 == 'Z') {
+            max_z = max_z.max(w.1);
+        }
+        count += 1;
+    }
     let mut p = Program {
-        lines: lines.len(),
+        lines: count,
         ..Default::default()
     };
     let mut pos = DVec3::new(0.0, 0.0, max_z);
     let (mut motion, mut absolute, mut scale, mut feed) = (0u8, true, 1.0f64, None::<f64>);
     let mut stop = true;
-    for l in &lines {
+    for (k, l) in text.lines().enumerate() {
+        let l = &parse::parse_line(l, k + 1)?;
+        if p.segments.len() > MAX_SEGMENTS {
+            bail!(
+                "line {}: the job comes to more than {} million moves (arcs in chords of \
+                 {ARC_TOLERANCE} mm), more than is taken",
+                l.number,
+                MAX_SEGMENTS / 1_000_000
+            );
+        }
         for c in &l.comments {
             let lower = c.to_ascii_lowercase();
             if let Some(rest) = lower

@@ -28,7 +28,7 @@ pub struct JobLine {
 /// The lines of a job that carry anything for GRBL.
 pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
     let what = path.display().to_string();
-    let text = std::fs::read_to_string(path).ctx(&what)?;
+    let text = crate::input::read_text(path, crate::input::MAX_FILE)?;
     let mut out = Vec::new();
     for (k, l) in text.lines().enumerate() {
         let s = strip(l);
@@ -461,7 +461,7 @@ pub fn check(r: &mut Replies, lines: &[JobLine], opts: &Options) -> Result<Vec<S
 /// The last job line a journal records as acknowledged.
 pub fn journal_last(path: &Path) -> Result<usize> {
     let what = path.display().to_string();
-    let text = std::fs::read_to_string(path).ctx(&what)?;
+    let text = crate::input::read_text(path, crate::input::MAX_FILE)?;
     let mut last = None;
     for (k, l) in text.lines().enumerate() {
         let l = l.trim();

@@ -140,7 +140,7 @@ pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result
     let g = read_gray(path)?;
     let side_path = sidecar_path(path);
     let side = if side_path.exists() {
-        Some(std::fs::read_to_string(&side_path).ctx(side_path.display())?)
+        Some(crate::input::read_text(&side_path, crate::input::MAX_TEXT)?)
     } else {
         None
     };

@@ -504,16 +504,20 @@ pub fn out_of_travel(prog: &Program, m: &Machine, origin: (f64, f64)) -> Vec<usi
 /// limits along each move, junction speeds from the junction deviation, a
 /// forward and backward pass, trapezoidal speed profiles; plus dwells.
 pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
-    let segs: Vec<&Segment> = prog
-        .segments
-        .iter()
-        .filter(|s| (s.b - s.a).length() > 1e-9)
+    // moves of some length, by index (4 bytes each: a 30 million move
+    // job holds 4 arrays of f64 beside them, not a copy of its moves)
+    let segs: Vec<u32> = (0..prog.segments.len() as u32)
+        .filter(|&k| {
+            let s = &prog.segments[k as usize];
+            (s.b - s.a).length() > 1e-9
+        })
         .collect();
     let n = segs.len();
     if n == 0 {
         return prog.dwell_s;
     }
-    let units: Vec<DVec3> = segs.iter().map(|s| (s.b - s.a).normalize()).collect();
+    let seg = |k: usize| &prog.segments[segs[k] as usize];
+    let unit = |k: usize| (seg(k).b - seg(k).a).normalize();
     let limit = |u: DVec3, per_axis: &dyn Fn(usize) -> f64| {
         (0..3)
             .filter(|&k| u[k].abs() > 1e-12)
@@ -523,8 +527,8 @@ pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
     let mut vmax = vec![0.0; n];
     let mut acc = vec![0.0; n];
     let mut len = vec![0.0; n];
-    for (k, s) in segs.iter().enumerate() {
-        let u = units[k];
+    for k in 0..n {
+        let (s, u) = (seg(k), unit(k));
         let rate = limit(u, &|a| m.max_rate.get(a) / 60.0);
         vmax[k] = if s.kind == Kind::Rapid {
             rate
@@ -535,12 +539,12 @@ pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
         len[k] = (s.b - s.a).length();
     }
     // highest entry speed allowed by the junction with the previous move
-    let mut entry_max = vec![0.0; n];
+    let mut entry = vec![0.0; n];
     for k in 1..n {
-        if segs[k].stop_before {
+        if seg(k).stop_before {
             continue;
         }
-        let cos = -units[k - 1].dot(units[k]);
+        let cos = -unit(k - 1).dot(unit(k));
         let vj = if cos > 0.999999 {
             0.0
         } else if cos < -0.999999 {
@@ -549,20 +553,19 @@ pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
             let s = (0.5 * (1.0 - cos)).sqrt();
             (acc[k].min(acc[k - 1]) * m.junction_deviation * s / (1.0 - s)).sqrt()
         };
-        entry_max[k] = vj.min(vmax[k]).min(vmax[k - 1]);
+        entry[k] = vj.min(vmax[k]).min(vmax[k - 1]);
     }
-    let mut entry = entry_max.clone();
-    let mut exit = vec![0.0; n];
+    // backward pass: a move's exit is the next one's (final) entry
     for k in (0..n).rev() {
         let next_entry = if k + 1 < n { entry[k + 1] } else { 0.0 };
-        exit[k] = next_entry;
         entry[k] = entry[k].min((next_entry * next_entry + 2.0 * acc[k] * len[k]).sqrt());
     }
     let mut t = prog.dwell_s;
     let mut v_in = 0.0f64;
     for k in 0..n {
+        let exit = if k + 1 < n { entry[k + 1] } else { 0.0 };
         let ve = entry[k].min(v_in);
-        let vx = exit[k].min((ve * ve + 2.0 * acc[k] * len[k]).sqrt());
+        let vx = exit.min((ve * ve + 2.0 * acc[k] * len[k]).sqrt());
         let a = acc[k];
         let vp = vmax[k]
             .min(((2.0 * a * len[k] + ve * ve + vx * vx) / 2.0).sqrt())
