@@ -314,6 +314,34 @@ fn hostile_numbers_in_files_fail_cleanly() {
             ],
             "--stock",
         ),
+        (
+            vec![
+                "carve",
+                "--resolution",
+                "32",
+                "--angle",
+                "nan",
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            "--angle",
+        ),
+        // an oversampled stock past the cells taken
+        (
+            vec![
+                "simulate",
+                job.to_str().unwrap(),
+                "--relief",
+                relief.to_str().unwrap(),
+                "--stock",
+                "9000x9000x10",
+                "--oversample",
+                "15",
+                "-o",
+                cut.to_str().unwrap(),
+            ],
+            "cells, more than the 128 million taken",
+        ),
     ] {
         fails_with(&args, names);
         assert!(!out.exists() && !cut.exists());
