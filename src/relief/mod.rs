@@ -167,13 +167,18 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                     poisson::solve_neumann(&div)
                 }
             };
-            let main = t.time("poisson", || solve(&gx, &gy));
             match p.steps_mm {
                 Some(s) if field.silhouette_edges > 0 => {
+                    // the steps first: if they alone exceed the depth, the
+                    // main solve is not worth doing
                     let steps = t.time("poisson (steps)", || solve(&field.sx, &field.sy));
+                    let nf = field.n_fine as f64;
+                    if s * nf * range(&steps, &steps, 0.0) >= p.depth_mm {
+                        bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");
+                    }
+                    let main = t.time("poisson", || solve(&gx, &gy));
                     // choose c so a unit step (1 / n_fine of h) becomes s mm
                     // after the final scaling to depth
-                    let nf = field.n_fine as f64;
                     let mut c = s * nf * range(&main, &steps, 0.0) / p.depth_mm;
                     let mut converged = false;
                     for _ in 0..200 {
@@ -195,7 +200,7 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                         .for_each(|(a, b)| *a += c * b);
                     to_mm(&total, p.depth_mm)
                 }
-                _ => to_mm(&main, p.depth_mm),
+                _ => to_mm(&t.time("poisson", || solve(&gx, &gy)), p.depth_mm),
             }
         }
     };
