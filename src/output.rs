@@ -21,12 +21,30 @@ pub struct Outputs<'a> {
     files: Vec<(PathBuf, Content<'a>)>,
 }
 
-fn temp_path(p: &Path) -> PathBuf {
+/// A new temporary file beside `p`, created exclusively (O_EXCL: an
+/// existing file or a planted symlink at the name is never opened) under a
+/// name no one can predict (a randomly keyed hash).
+fn create_temp(p: &Path) -> std::io::Result<(PathBuf, std::fs::File)> {
+    use std::hash::BuildHasher;
     let name = p
         .file_name()
         .map(|n| n.to_string_lossy().to_string())
         .unwrap_or_default();
-    p.with_file_name(format!(".{name}.relievo-{}.tmp", std::process::id()))
+    let keys = std::collections::hash_map::RandomState::new();
+    let mut k = 0u64;
+    loop {
+        let tag = keys.hash_one((std::process::id(), k));
+        let tmp = p.with_file_name(format!(".{name}.relievo-{tag:016x}.tmp"));
+        match std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+        {
+            Ok(f) => return Ok((tmp, f)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && k < 16 => k += 1,
+            Err(e) => return Err(e),
+        }
+    }
 }
 
 /// Fail early, before long work, when `path` cannot be written: its
@@ -45,6 +63,16 @@ pub fn check_writable(path: &Path) -> Result<()> {
     }
     if path.is_dir() {
         bail!("{}: cannot write: it is a directory", path.display());
+    }
+    // only regular files are replaced: renaming over /dev/null or a FIFO
+    // would swap the device for a file
+    if let Ok(m) = std::fs::metadata(path) {
+        if !m.is_file() {
+            bail!(
+                "{}: cannot write: not a regular file (a device, FIFO or socket)",
+                path.display()
+            );
+        }
     }
     Ok(())
 }
@@ -66,21 +94,29 @@ impl<'a> Outputs<'a> {
         let cleanup = |w: &[PathBuf]| w.iter().for_each(|t| drop(std::fs::remove_file(t)));
         let paths: Vec<PathBuf> = self.files.iter().map(|f| f.0.clone()).collect();
         for (path, content) in self.files {
-            let tmp = temp_path(&path);
-            let result = match content {
-                Content::Bytes(bytes) => std::fs::write(&tmp, bytes),
-                Content::Stream(write) => std::fs::File::create(&tmp).and_then(|f| {
-                    let mut w = std::io::BufWriter::with_capacity(1 << 20, f);
-                    write(&mut w)?;
-                    std::io::Write::flush(&mut w)
-                }),
+            if let Err(e) = check_writable(&path) {
+                cleanup(&written);
+                return Err(e);
+            }
+            let (tmp, f) = match create_temp(&path) {
+                Ok(t) => t,
+                Err(e) => {
+                    cleanup(&written);
+                    bail!("{}: cannot write: {e}", path.display());
+                }
             };
+            interrupt::remove_on_interrupt(&tmp);
+            let mut w = std::io::BufWriter::with_capacity(1 << 20, f);
+            let result = match content {
+                Content::Bytes(bytes) => std::io::Write::write_all(&mut w, &bytes),
+                Content::Stream(write) => write(&mut w),
+            }
+            .and_then(|_| std::io::Write::flush(&mut w));
+            written.push(tmp);
             if let Err(e) = result {
                 cleanup(&written);
-                drop(std::fs::remove_file(&tmp));
                 bail!("{}: cannot write: {e}", path.display());
             }
-            written.push(tmp);
         }
         for (k, path) in paths.iter().enumerate() {
             if let Err(e) = std::fs::rename(&written[k], path) {
@@ -91,6 +127,66 @@ impl<'a> Outputs<'a> {
                 bail!("{}: cannot write: {e}", path.display());
             }
         }
+        interrupt::keep_all();
         Ok(())
+    }
+}
+
+/// Files to remove if the process is interrupted (SIGINT, SIGTERM) before
+/// they are final: temporary files, and a `carve`'s relief until its job
+/// is written. The handler only calls `unlink` and `_exit`, which are safe
+/// in a signal handler; paths are held in a fixed table of leaked C strings.
+pub mod interrupt {
+    use std::ffi::CString;
+    use std::path::Path;
+    use std::sync::atomic::{AtomicPtr, Ordering};
+    use std::sync::Once;
+
+    const SLOTS: usize = 64;
+    static PATHS: [AtomicPtr<libc::c_char>; SLOTS] =
+        [const { AtomicPtr::new(std::ptr::null_mut()) }; SLOTS];
+    static INSTALL: Once = Once::new();
+
+    extern "C" fn on_signal(_: libc::c_int) {
+        for slot in &PATHS {
+            let p = slot.load(Ordering::SeqCst);
+            if !p.is_null() {
+                // SAFETY: p is a leaked, NUL-terminated CString
+                unsafe { libc::unlink(p) };
+            }
+        }
+        // SAFETY: _exit is async-signal-safe
+        unsafe { libc::_exit(130) };
+    }
+
+    /// Remove `path` if the process is interrupted from now on.
+    pub fn remove_on_interrupt(path: &Path) {
+        use std::os::unix::ffi::OsStrExt;
+        INSTALL.call_once(|| {
+            // SAFETY: installing a handler that only calls unlink and _exit
+            unsafe {
+                libc::signal(libc::SIGINT, on_signal as *const () as libc::sighandler_t);
+                libc::signal(libc::SIGTERM, on_signal as *const () as libc::sighandler_t);
+            }
+        });
+        let Ok(c) = CString::new(path.as_os_str().as_bytes()) else {
+            return;
+        };
+        let p = c.into_raw();
+        for slot in &PATHS {
+            if slot
+                .compare_exchange(std::ptr::null_mut(), p, Ordering::SeqCst, Ordering::SeqCst)
+                .is_ok()
+            {
+                return;
+            }
+        }
+    }
+
+    /// The registered files are final: keep them whatever happens.
+    pub fn keep_all() {
+        for slot in &PATHS {
+            slot.store(std::ptr::null_mut(), Ordering::SeqCst);
+        }
     }
 }

@@ -35,6 +35,10 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     );
     relievo::output::check_writable(&args.output)?;
     let r = rjob.run(&mut |_| {})?;
+    // all or nothing, also when interrupted: no relief without its job
+    for p in &r.written {
+        relievo::output::interrupt::remove_on_interrupt(p);
+    }
     let s = match cam.run(&r.relief) {
         Ok(s) => s,
         Err(e) => {

@@ -19,6 +19,12 @@ pub struct Sidecar {
     pub height_mm: f64,
     pub depth_mm: f64,
     pub pixels: [usize; 2],
+    /// Size and CRC-32 of the PNG this sidecar was written with: a reader
+    /// refuses a PNG that is not it (another run's, half a pair).
+    #[serde(default)]
+    pub png_bytes: Option<u64>,
+    #[serde(default)]
+    pub png_crc32: Option<u32>,
     #[serde(default)]
     pub params: serde_json::Value,
 }
@@ -73,6 +79,8 @@ pub fn encode_relief(r: &Relief, params: serde_json::Value) -> (Vec<u8>, Vec<u8>
         height_mm: r.height_mm,
         depth_mm: r.depth_mm,
         pixels: [r.heights.w, r.heights.h],
+        png_bytes: Some(png.len() as u64),
+        png_crc32: Some(crc32fast::hash(&png)),
         params,
     };
     let mut json = serde_json::to_vec_pretty(&side).expect("sidecar serializes");
@@ -137,7 +145,8 @@ pub fn gray(img: image::DynamicImage) -> Grid<f32> {
 /// `width_mm` and `depth_mm` (which also override a sidecar).
 pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result<Relief> {
     let what = path.display().to_string();
-    let g = read_gray(path)?;
+    let png = crate::input::read(path, crate::input::MAX_FILE)?;
+    let g = gray(decode_bytes(&png, &what)?);
     let side_path = sidecar_path(path);
     let side = if side_path.exists() {
         Some(crate::input::read_text(&side_path, crate::input::MAX_TEXT)?)
@@ -145,7 +154,31 @@ pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result
         None
     };
     let side_name = side_path.display().to_string();
-    relief_from(g, side.as_deref(), &side_name, width_mm, depth_mm, &what)
+    let r = relief_from(g, side.as_deref(), &side_name, width_mm, depth_mm, &what)?;
+    if let Some(text) = &side {
+        let s: Sidecar = serde_json::from_str(text).ctx(&side_name)?;
+        let crc = crc32fast::hash(&png);
+        let size_ok = s.pixels == [r.heights.w, r.heights.h];
+        let sum_ok = s.png_bytes.is_none_or(|n| n == png.len() as u64)
+            && s.png_crc32.is_none_or(|c| c == crc);
+        if !(size_ok && sum_ok) {
+            bail!(
+                "{what}: not the PNG its sidecar {side_name} was written with ({} x {} pixels, \
+                 {} bytes, CRC-32 {crc:08x}; the sidecar says {} x {}{}); written by another \
+                 run? Make the relief again",
+                r.heights.w,
+                r.heights.h,
+                png.len(),
+                s.pixels[0],
+                s.pixels[1],
+                match (s.png_bytes, s.png_crc32) {
+                    (Some(n), Some(c)) => format!(", {n} bytes, CRC-32 {c:08x}"),
+                    _ => String::new(),
+                }
+            );
+        }
+    }
+    Ok(r)
 }
 
 /// A relief from its decoded heights and its sidecar's text (if there is
