@@ -106,6 +106,56 @@ fn error_stops_at_its_line() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// After an error the spindle stops (issue 15): it kept turning over the
+/// refused job.
+#[test]
+fn an_error_stops_the_spindle() {
+    let d = scratch("send-error-spindle");
+    let (path, _) = write_job(&d, 300);
+    let text = std::fs::read_to_string(&path).unwrap().replacen(
+        "G21 G90 G94\n",
+        "G21 G90 G94\nM3 S10000\n",
+        1,
+    );
+    std::fs::write(&path, text).unwrap();
+    for at in [100, 299] {
+        let mut p = port(Faults {
+            error_at: Some((at, 33)),
+            ..Default::default()
+        });
+        let e = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap_err();
+        assert!(e.0.contains("error:33"), "{e}");
+        assert_eq!(p.sim.spindle_rpm(), 0.0, "error at line {at}");
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// A job line carrying a realtime byte is refused before anything is sent
+/// (a '!' held the machine and the job ended "acknowledged").
+#[test]
+fn realtime_bytes_in_job_lines_are_refused() {
+    let d = scratch("send-realtime");
+    for (bad, byte) in [
+        ("G1 X1 ! Y2", "0x21"),
+        ("G1 X~2", "0x7e"),
+        ("G1 X\u{18}1", "0x18"),
+    ] {
+        let path = d.join("rt.nc");
+        std::fs::write(&path, format!("G21 G90\nG1 X0 F100\n{bad}\nM30\n")).unwrap();
+        let mut p = port(Faults::default());
+        let e = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap_err();
+        assert!(e.0.contains("rt.nc: line 3") && e.0.contains(byte), "{e}");
+        assert!(p.sim.log.is_empty(), "lines were sent: {:?}", p.sim.log);
+    }
+    // inside a comment the byte is never sent, so it is fine
+    let path = d.join("ok.nc");
+    std::fs::write(&path, "(what? stop!)\nG21 G90\nG1 X1 F100 ; done!\n").unwrap();
+    job(&path)
+        .run(&mut port(Faults::default()), &AtomicBool::new(false))
+        .unwrap();
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 #[test]
 fn alarm_stops_with_its_meaning() {
     let d = scratch("send-alarm");

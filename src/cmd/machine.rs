@@ -27,13 +27,19 @@ pub fn run(args: MachineArgs) -> relievo::Result<()> {
     let lines = match args.action {
         MachineAction::Status => {
             r.port.write_all(b"?")?;
+            // a bounded wait, however chatty the device
             let mut got = Vec::new();
-            while let Some(l) = r.next(1.0)? {
+            let until = r.port.now() + 2.0;
+            while r.port.now() < until {
+                let Some(l) = r.next(0.25)? else { continue };
                 let status = l.starts_with('<');
                 got.push(l);
                 if status {
                     break;
                 }
+            }
+            if !got.iter().any(|l| l.starts_with('<')) {
+                relievo::bail!("{}: no status report within 2 s of '?'", args.port);
             }
             got
         }

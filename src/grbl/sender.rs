@@ -35,6 +35,18 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
         if s.is_empty() {
             continue;
         }
+        // GRBL acts on these bytes wherever they come, even inside a line:
+        // a '!' in a job would hold the machine and the job end "done"
+        if let Some(b) = s
+            .bytes()
+            .find(|&b| matches!(b, b'?' | b'!' | b'~') || !(0x20..0x7f).contains(&b))
+        {
+            bail!(
+                "{what}: line {}: the byte 0x{b:02x} is a GRBL realtime command or not G-code; \
+                 a job line cannot carry it",
+                k + 1
+            );
+        }
         if s.len() > 79 {
             bail!(
                 "{what}: line {}: {} characters after stripping; GRBL takes 79",
@@ -434,6 +446,28 @@ pub fn stream(
     }
     if let Some(j) = journal.as_mut() {
         j.flush().ctx("journal")?;
+    }
+    if stopping {
+        // a refused job must not leave the spindle turning: once the hold
+        // has taken (as on Ctrl-C), the spindle-stop override; and an M5
+        // for a machine that had nothing left to hold (lines still
+        // buffered behind a hold are not overrun)
+        let t = r.port.now();
+        while r.port.now() < t + 0.5 {
+            r.next(0.1)?;
+        }
+        r.port.write_all(&[SPINDLE_STOP])?;
+        if inflight.is_empty() {
+            r.port.write_all(b"M5\n")?;
+            let t = r.port.now();
+            while r.port.now() < t + 2.0 {
+                if let Some(l) = r.next(0.1)? {
+                    if l == "ok" || l.starts_with("error:") {
+                        break;
+                    }
+                }
+            }
+        }
     }
     progress.finish();
     out.seconds = r.port.now() - start;

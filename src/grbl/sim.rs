@@ -120,6 +120,11 @@ impl SimGrbl {
         s
     }
 
+    /// The spindle's speed now (0 = stopped).
+    pub fn spindle_rpm(&self) -> f64 {
+        self.spindle
+    }
+
     /// Bytes the machine has sent since the last call.
     pub fn take_output(&mut self) -> Vec<u8> {
         std::mem::take(&mut self.out)
