@@ -34,12 +34,14 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
         material,
     );
     relievo::output::check_writable(&args.output)?;
-    let r = rjob.run(&mut |_| {})?;
+    let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
     // all or nothing, also when interrupted: no relief without its job
     for p in &r.written {
         relievo::output::interrupt::remove_on_interrupt(p);
     }
-    let s = match cam.run(&r.relief) {
+    let s = match super::with_spinner(quiet, "planning and checking the job", || {
+        cam.run(&r.relief)
+    }) {
         Ok(s) => s,
         Err(e) => {
             // all or nothing: no relief without its job

@@ -54,8 +54,25 @@ pub fn spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
         return None;
     }
     let pb = indicatif::ProgressBar::new_spinner();
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})") {
+        pb.set_style(style);
+    }
     pb.enable_steady_tick(std::time::Duration::from_millis(100));
     Some(pb)
+}
+
+/// Run `work` under a spinner saying `what` (a long toolpath shows that it
+/// is alive and for how long).
+pub fn with_spinner<T>(quiet: bool, what: &str, work: impl FnOnce() -> T) -> T {
+    let pb = spinner(quiet);
+    if let Some(pb) = &pb {
+        pb.set_message(what.to_string());
+    }
+    let out = work();
+    if let Some(pb) = pb {
+        pb.finish_and_clear();
+    }
+    out
 }
 
 /// Stage timings for --verbose.

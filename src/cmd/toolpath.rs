@@ -1,7 +1,7 @@
 //! `relievo toolpath`: a relief file to a GRBL job; the cutting flags
 //! it shares with `carve`.
 
-use super::{parse_pair, parse_size, parse_stock, print_timings};
+use super::{parse_pair, parse_size, parse_stock, print_timings, with_spinner};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -260,7 +260,11 @@ pub fn run(args: ToolpathArgs, quiet: bool, verbose: bool) -> relievo::Result<()
         args.relief.display().to_string(),
         args.material,
     );
-    let s = job.run(&relief)?;
+    let what = format!(
+        "planning and checking the job on the {} x {} px relief",
+        relief.heights.w, relief.heights.h
+    );
+    let s = with_spinner(quiet, &what, || job.run(&relief))?;
     report(&s, quiet, verbose);
     Ok(())
 }
