@@ -335,9 +335,12 @@ fn fuzz_png_and_sidecar() {
     fuzz("sidecar", &[side], |b, flag| {
         let text = String::from_utf8_lossy(b);
         let over = flag.then_some(10.0);
+        let Ok(side) = file::parse_sidecar(&text, "fuzz.json") else {
+            return;
+        };
         if let Ok(r) = file::relief_from(
             heights.clone(),
-            Some(&text),
+            Some(&side),
             "fuzz.json",
             over,
             None,
@@ -451,8 +454,11 @@ fn regressions() {
     assert!(gcode::program("G17 G1 Z-1 F100\nG2 X10 Y0 R-1000000\n").is_err());
     // a sidecar's width of 5e-324 panicked
     let g = Grid::from_vec(2, 2, vec![0.0, 1.0, 0.5, 0.2]);
-    let side = r#"{"width_mm": 5e-324, "depth_mm": 3}"#;
-    assert!(file::relief_from(g, Some(side), "tiny.json", None, None, "tiny.png").is_err());
+    let side = r#"{"format": "relievo-relief/1", "width_mm": 5e-324, "height_mm": 1,
+        "depth_mm": 3, "pixels": [2, 2]}"#;
+    let side = file::parse_sidecar(side, "tiny.json").unwrap();
+    let e = file::relief_from(g, Some(&side), "tiny.json", None, None, "tiny.png").unwrap_err();
+    assert!(e.0.contains("tiny.png: width 5e-324"), "{e}");
     // a frame word starting with a multibyte character panicked (fuzzer)
     let frame = "(frame: stock \u{e9}Y0 Y0 W1 H1 T1, panel X0 Y0, Z0 top)\n";
     assert!(relievo::cam::layout::Frame::find(frame).is_err());

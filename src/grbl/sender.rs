@@ -331,11 +331,7 @@ pub fn stream(
     loop {
         if cancel.load(Ordering::Relaxed) && !stopping {
             r.port.write_all(&[FEED_HOLD])?;
-            let t = r.port.now();
-            while r.port.now() < t + 0.5 {
-                r.next(0.1)?;
-            }
-            r.port.write_all(&[SPINDLE_STOP])?;
+            spindle_stop_once_held(r)?;
             out.stop = Some(Stop::Cancelled);
             break;
         }
@@ -452,11 +448,7 @@ pub fn stream(
         // has taken (as on Ctrl-C), the spindle-stop override; and an M5
         // for a machine that had nothing left to hold (lines still
         // buffered behind a hold are not overrun)
-        let t = r.port.now();
-        while r.port.now() < t + 0.5 {
-            r.next(0.1)?;
-        }
-        r.port.write_all(&[SPINDLE_STOP])?;
+        spindle_stop_once_held(r)?;
         if inflight.is_empty() {
             r.port.write_all(b"M5\n")?;
             let t = r.port.now();
@@ -472,6 +464,16 @@ pub fn stream(
     progress.finish();
     out.seconds = r.port.now() - start;
     Ok(out)
+}
+
+/// After a feed hold: half a second for the hold to take (replies read
+/// meanwhile), then the spindle-stop override, which GRBL honours in Hold.
+fn spindle_stop_once_held(r: &mut Replies) -> Result<()> {
+    let t = r.port.now();
+    while r.port.now() < t + 0.5 {
+        r.next(0.1)?;
+    }
+    r.port.write_all(&[SPINDLE_STOP])
 }
 
 /// Validate the whole job in check mode: `$C`, stream everything, `$C`

@@ -148,15 +148,15 @@ pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result
     let png = crate::input::read(path, crate::input::MAX_FILE)?;
     let g = gray(decode_bytes(&png, &what)?);
     let side_path = sidecar_path(path);
+    let side_name = side_path.display().to_string();
     let side = if side_path.exists() {
-        Some(crate::input::read_text(&side_path, crate::input::MAX_TEXT)?)
+        let text = crate::input::read_text(&side_path, crate::input::MAX_TEXT)?;
+        Some(parse_sidecar(&text, &side_name)?)
     } else {
         None
     };
-    let side_name = side_path.display().to_string();
-    let r = relief_from(g, side.as_deref(), &side_name, width_mm, depth_mm, &what)?;
-    if let Some(text) = &side {
-        let s: Sidecar = serde_json::from_str(text).ctx(&side_name)?;
+    let r = relief_from(g, side.as_ref(), &side_name, width_mm, depth_mm, &what)?;
+    if let Some(s) = &side {
         let crc = crc32fast::hash(&png);
         let size_ok = s.pixels == [r.heights.w, r.heights.h];
         let sum_ok = s.png_bytes.is_none_or(|n| n == png.len() as u64)
@@ -181,21 +181,23 @@ pub fn load(path: &Path, width_mm: Option<f64>, depth_mm: Option<f64>) -> Result
     Ok(r)
 }
 
-/// A relief from its decoded heights and its sidecar's text (if there is
-/// one), the flags overriding the sidecar.
+/// A sidecar from its JSON text; `name` names it in errors.
+pub fn parse_sidecar(text: &str, name: &str) -> Result<Sidecar> {
+    serde_json::from_str(text).ctx(name)
+}
+
+/// A relief from its decoded heights and its sidecar (if there is one,
+/// named `side_name`), the flags overriding the sidecar.
 pub fn relief_from(
     g: Grid<f32>,
-    side: Option<&str>,
+    side: Option<&Sidecar>,
     side_name: &str,
     width_mm: Option<f64>,
     depth_mm: Option<f64>,
     what: &str,
 ) -> Result<Relief> {
-    let side: Option<Sidecar> = side
-        .map(|text| serde_json::from_str(text).ctx(side_name))
-        .transpose()?;
-    let width = width_mm.or(side.as_ref().map(|s| s.width_mm));
-    let depth = depth_mm.or(side.as_ref().map(|s| s.depth_mm));
+    let width = width_mm.or(side.map(|s| s.width_mm));
+    let depth = depth_mm.or(side.map(|s| s.depth_mm));
     let (Some(width), Some(depth)) = (width, depth) else {
         bail!("{what}: no sidecar {side_name}; give --width and --depth in mm");
     };
