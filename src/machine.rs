@@ -38,6 +38,10 @@ pub struct Machine {
     pub max_rate: Axes,
     /// Acceleration per axis, mm/s^2.
     pub acceleration: Axes,
+    /// Motor steps per mm ($100-$102): a move of less than a step is no
+    /// move to GRBL.
+    #[serde(default = "default_steps")]
+    pub steps_per_mm: Axes,
     pub spindle: Spindle,
     /// The tool table: `--tool T2` finds its spec here.
     #[serde(default)]
@@ -50,6 +54,15 @@ pub struct ToolEntry {
     pub tool: String,
     #[serde(default)]
     pub name: String,
+}
+
+/// GRBL's default $100-$102.
+fn default_steps() -> Axes {
+    Axes {
+        x: 250.0,
+        y: 250.0,
+        z: 250.0,
+    }
 }
 
 const BUILTIN: [(&str, &str); 3] = [
@@ -84,8 +97,15 @@ impl Machine {
         let m: Machine = toml::from_str(text).ctx(name_or_path)?;
         let pos = |v: f64| v.is_finite() && v > 0.0;
         for k in 0..3 {
-            if !pos(m.travel.get(k)) || !pos(m.max_rate.get(k)) || !pos(m.acceleration.get(k)) {
-                bail!("{name_or_path}: travel, max_rate and acceleration must be positive on every axis");
+            if !pos(m.travel.get(k))
+                || !pos(m.max_rate.get(k))
+                || !pos(m.acceleration.get(k))
+                || !pos(m.steps_per_mm.get(k))
+            {
+                bail!(
+                    "{name_or_path}: travel, max_rate, acceleration and steps_per_mm must be \
+                     positive on every axis"
+                );
             }
         }
         if !(m.spindle.min.is_finite() && m.spindle.min >= 0.0 && pos(m.spindle.max))

@@ -20,9 +20,18 @@ pub struct GrblSimArgs {
     /// Fault: raise ALARM:CODE (default 1) at the Nth G-code line.
     #[arg(long, value_name = "N[:CODE]")]
     pub alarm_at: Option<String>,
-    /// Fault: drop the link after this many bytes.
+    /// Fault: cut the link after this many bytes, as a pulled cable does
+    /// (the machine runs on; replies are lost). When the host closes the
+    /// port and opens it again, the board resets, as an Arduino does.
     #[arg(long)]
     pub disconnect_after: Option<usize>,
+    /// Fault: a feed hold at the Nth G-code line that cycle start does not
+    /// release (a stuck hold button, an open door), until a reset.
+    #[arg(long, value_name = "N")]
+    pub hold_at: Option<usize>,
+    /// Fault: after the welcome, answer nothing and print [MSG:] lines.
+    #[arg(long)]
+    pub chatty: bool,
     /// Fault: probability of noise bytes in a reply line.
     #[arg(long, default_value_t = 0.0)]
     pub garble: f64,
@@ -60,10 +69,15 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
         alarm_at: parse_fault(&args.alarm_at, 1, "--alarm-at")?,
         disconnect_after: args.disconnect_after,
         garble: args.garble,
+        hold_at: args.hold_at,
+        chatty: args.chatty,
     };
     let (mut master, slave) = serialport::TTYPort::pair()
         .map_err(|e| relievo::Error(format!("grbl-sim: no pseudo-terminal: {e}")))?;
     let name = serialport::SerialPort::name(&slave).unwrap_or_default();
+    // the host's side is closed here, so that the master sees when the
+    // host closes the port (reads fail with EIO) and opens it again
+    drop(slave);
     println!("{name}");
     std::io::stdout().flush().ok();
     let mut log = match &args.log {
@@ -78,23 +92,50 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
         .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
     let start = std::time::Instant::now();
     let mut buf = [0u8; 1024];
+    // whether the host has the port open
+    let mut open = false;
     loop {
         let n = match master.read(&mut buf) {
             Ok(n) => n,
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => 0,
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => 0,
+            Err(e)
+                if e.raw_os_error() == Some(libc::EIO)
+                    || e.kind() == std::io::ErrorKind::BrokenPipe =>
+            {
+                // nobody has the port open: the machine runs on unheard
+                open = false;
+                std::thread::sleep(std::time::Duration::from_millis(2));
+                0
+            }
             Err(e) => relievo::bail!("grbl-sim: {e}"),
         };
         let t = start.elapsed().as_secs_f64() * args.speed;
         sim.advance(t);
+        let reopened = !open && (n > 0 || poll_open(&master));
+        if reopened {
+            open = true;
+            if sim.disconnected {
+                // a new connection after a cut: the board resets (DTR)
+                sim.reconnect();
+            }
+        }
         for &b in &buf[..n] {
             sim.receive(b);
         }
-        let out = sim.take_output();
-        if !out.is_empty() && !sim.disconnected {
-            master
-                .write_all(&out)
-                .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+        if !open {
+            // a host that is not there hears nothing; the welcome from
+            // power-up waits for the first one
+            if sim.disconnected {
+                sim.take_output();
+            }
+        } else {
+            let out = sim.take_output();
+            if !out.is_empty() {
+                master
+                    .write_all(&out)
+                    .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+            }
         }
         if let Some(f) = log.as_mut() {
             for l in &sim.log[logged..] {
@@ -109,4 +150,18 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
             );
         }
     }
+}
+
+/// Whether the host side of the pseudo-terminal is open: the master
+/// polls as hung up (and reads fail) while it is not.
+fn poll_open(master: &serialport::TTYPort) -> bool {
+    use std::os::fd::AsRawFd;
+    let mut p = libc::pollfd {
+        fd: master.as_raw_fd(),
+        events: libc::POLLIN,
+        revents: 0,
+    };
+    // SAFETY: one valid pollfd, no timeout
+    let r = unsafe { libc::poll(&mut p, 1, 0) };
+    r >= 0 && p.revents & libc::POLLHUP == 0
 }

@@ -21,12 +21,21 @@ pub struct SendArgs {
     /// Start at this job line, re-entering safely.
     #[arg(long, conflicts_with = "resume")]
     pub resume_from: Option<usize>,
-    /// Resume after the last line this journal says GRBL acknowledged.
+    /// Resume at the first line this journal leaves in doubt (sent, not
+    /// known to have run); refused when running those again could change
+    /// the cut.
     #[arg(long)]
     pub resume: Option<PathBuf>,
-    /// Journal of acknowledged lines [default: JOB.journal].
+    /// Journal of sent, acknowledged and executed lines [default: JOB.journal].
     #[arg(long)]
     pub journal: Option<PathBuf>,
+    /// Seconds without an answer from GRBL that mean the link is dead.
+    #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
+    pub link_timeout: f64,
+    /// Seconds the machine may stay in feed hold (or with its door open)
+    /// before `send` stops the spindle and gives up.
+    #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
+    pub hold_limit: f64,
 }
 
 /// Ctrl-C: set by the signal handler, read by the sender.
@@ -47,7 +56,17 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         journal: args.journal,
         progress: !quiet,
         rx_buffer: 128,
+        link_timeout: Some(args.link_timeout),
+        hold_limit: Some(args.hold_limit),
     };
+    for (flag, v) in [
+        ("--link-timeout", args.link_timeout),
+        ("--hold-limit", args.hold_limit),
+    ] {
+        if !(v.is_finite() && (0.1..=86400.0).contains(&v)) {
+            relievo::bail!("{flag} {v}: give seconds from 0.1 to 86400");
+        }
+    }
     // read the job before touching the machine
     relievo::grbl::sender::load_job(&job.job)?;
     let mut port = SerialLink::open(&args.port, args.baud)?;

@@ -3,6 +3,7 @@
 //! tool moves (arcs become chords within 0.1 micrometre).
 
 pub mod emit;
+pub mod modal;
 pub mod parse;
 
 use crate::bail;
@@ -105,8 +106,7 @@ pub fn program(text: &str) -> Result<Program> {
         lines: count,
         ..Default::default()
     };
-    let mut pos = DVec3::new(0.0, 0.0, max_z);
-    let (mut motion, mut absolute, mut scale, mut feed) = (0u8, true, 1.0f64, None::<f64>);
+    let mut modal = modal::Modal::new(DVec3::new(0.0, 0.0, max_z));
     let mut stop = true;
     for (k, l) in text.lines().enumerate() {
         let l = &parse::parse_line(l, k + 1)?;
@@ -131,63 +131,17 @@ pub fn program(text: &str) -> Result<Program> {
             }
         }
         let n = l.number;
-        let get = |c: char| l.words.iter().rev().find(|w| w.0 == c).map(|w| w.1);
-        let mut dwell = false;
-        let mut new_motion = None;
-        for &(c, v) in &l.words {
-            match (c, v as i32) {
-                ('G', 0..=3) => new_motion = Some(v as u8),
-                ('G', 4) => dwell = true,
-                ('G', 20) => scale = 25.4,
-                ('G', 21) => scale = 1.0,
-                ('G', 90) => absolute = true,
-                ('G', 91) => absolute = false,
-                ('M', _) => stop = true,
-                _ => {}
-            }
-        }
-        if let Some(f) = get('F') {
-            if f <= 0.0 {
-                bail!("line {n}: feed rate F{f} must be positive");
-            }
-            feed = Some(f * scale);
-        }
-        if dwell {
-            let Some(s) = get('P') else {
-                bail!("line {n}: G4 needs a P word (seconds)")
-            };
-            if s < 0.0 {
-                bail!("line {n}: negative dwell P{s}");
-            }
-            p.dwell_s += s;
-            stop = true;
-            continue;
-        }
-        if let Some(m) = new_motion {
-            motion = m;
-        }
-        let axes = ['X', 'Y', 'Z'].map(get);
-        if axes.iter().all(Option::is_none) {
-            if new_motion.is_some_and(|m| m >= 2) {
-                bail!("line {n}: arc without an end point");
-            }
-            continue;
-        }
-        let mut target = pos;
-        for (k, v) in axes.iter().enumerate() {
-            if let Some(v) = v {
-                target[k] = if absolute {
-                    v * scale
-                } else {
-                    pos[k] + v * scale
-                };
-            }
-        }
+        let step = modal
+            .apply(l)
+            .map_err(|r| crate::Error(format!("line {n}: {}", r.what)))?;
+        stop |= step.sync;
+        p.dwell_s += step.dwell.unwrap_or(0.0);
+        let Some(target) = step.to else { continue };
+        let (pos, motion) = (step.from, step.motion);
         let kind = if motion == 0 { Kind::Rapid } else { Kind::Feed };
-        let f = match (kind, feed) {
-            (Kind::Rapid, _) => 0.0,
-            (Kind::Feed, Some(f)) => f,
-            (Kind::Feed, None) => bail!("line {n}: feed move with no feed rate set (F)"),
+        let f = match kind {
+            Kind::Rapid => 0.0,
+            Kind::Feed => modal.feed.unwrap_or(0.0),
         };
         let mut push = |a: DVec3, b: DVec3, stop_before: &mut bool| {
             p.segments.push(Segment {
@@ -201,21 +155,13 @@ pub fn program(text: &str) -> Result<Program> {
             *stop_before = false;
         };
         if motion >= 2 {
-            for (a, b) in arc(
-                pos,
-                target,
-                motion == 2,
-                get('I').map(|v| v * scale),
-                get('J').map(|v| v * scale),
-                get('R').map(|v| v * scale),
-                n,
-            )? {
+            let [i, j, r] = step.ijr;
+            for (a, b) in arc(pos, target, motion == 2, i, j, r, n)? {
                 push(a, b, &mut stop);
             }
         } else if target != pos {
             push(pos, target, &mut stop);
         }
-        pos = target;
     }
     Ok(p)
 }

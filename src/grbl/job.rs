@@ -1,8 +1,10 @@
 //! The `send` command as one library call: a job file and a port in, the
 //! job streamed (optionally checked first, optionally resumed), or one
-//! clear error saying where it stopped and how to resume.
+//! clear error saying where it stopped, what is known to have run and how
+//! to resume.
 
 use super::port::Port;
+use super::resume::{reentry, resume_point, standing};
 use super::sender::{self, JobLine, Options, Outcome, Replies};
 use crate::bail;
 use crate::error::Result;
@@ -18,12 +20,17 @@ pub struct SendJob {
     pub send_response: bool,
     /// Start at this job file line (with a safe re-entry).
     pub resume_from: Option<usize>,
-    /// Resume after the last line this journal records.
+    /// Resume at the first line this journal leaves in doubt.
     pub resume: Option<PathBuf>,
-    /// Journal of acknowledged lines; `None` = JOB.journal.
+    /// Journal of sent, acknowledged and executed lines; `None` =
+    /// JOB.journal.
     pub journal: Option<PathBuf>,
     pub progress: bool,
     pub rx_buffer: usize,
+    /// Seconds of silence that mean a dead link (default 10).
+    pub link_timeout: Option<f64>,
+    /// Seconds the machine may stay in Hold (default 600).
+    pub hold_limit: Option<f64>,
 }
 
 impl SendJob {
@@ -39,20 +46,39 @@ impl SendJob {
         let lines = sender::load_job(&self.job)?;
         let start = self.start(&lines)?;
         let journal = self.journal_path();
-        let opts = Options {
+        let defaults = Options::default();
+        let mut opts = Options {
             char_counting: !self.send_response,
             rx_buffer: self.rx_buffer.max(16),
             journal: Some(journal.clone()),
             progress: self.progress,
-            ..Options::default()
+            link_timeout: self.link_timeout.unwrap_or(defaults.link_timeout),
+            hold_limit: self.hold_limit.unwrap_or(defaults.hold_limit),
+            ..defaults
         };
         let mut r = Replies::new(port);
         r.handshake(opts.welcome_timeout)?;
-        if r.state()?.is_some_and(|s| s.starts_with("Alarm")) {
+        let Some(st) = r.status()? else {
+            bail!(
+                "no status report within 1 s after the welcome: not a GRBL 1.1 controller, \
+                 or the link is bad; nothing was sent"
+            );
+        };
+        if st.state.starts_with("Alarm") {
             bail!(
                 "GRBL is in alarm (position may be lost after a reset in motion): check the \
                  machine, then `relievo machine home` or `unlock` on this port, and send again"
             );
+        }
+        // an idle machine's free planner blocks are all its blocks
+        if let (true, Some((blocks, _))) = (st.state == "Idle", st.free) {
+            opts.planner = blocks.max(1);
+        }
+        // steps per mm tell which moves surely take a planner block
+        if let Ok(settings) = r.command("$$", 2.0) {
+            if let Some(m) = sender::min_move(&settings) {
+                opts.min_move = m;
+            }
         }
         if self.check {
             let errors = sender::check(&mut r, &lines, &opts)?;
@@ -66,38 +92,29 @@ impl SendJob {
                 );
             }
         }
-        if start == 0 {
+        if self.resume.is_none() && self.resume_from.is_none() {
             // a fresh run starts a fresh journal
-            std::fs::write(&journal, b"")
-                .map_err(|e| crate::Error(format!("{}: {e}", journal.display())))?;
+            super::resume::Journal::open(&journal, true)?;
         }
         let preamble = if start > 0 {
-            sender::reentry(&lines, start)
+            reentry(&lines, start)
         } else {
             Vec::new()
         };
-        let resume_hint = |acked_to: Option<usize>| {
-            format!(
-                "; the journal {} holds the last acknowledged line{}; resume with --resume {}",
-                journal.display(),
-                acked_to.map_or(String::new(), |l| format!(" ({l})")),
-                journal.display()
-            )
-        };
         let out = match sender::stream(&mut r, &lines[start..], &preamble, &opts, false, cancel) {
             Ok(o) => o,
-            Err(e) => {
-                let last = sender::journal_last(&journal).ok();
-                bail!("{}: {e}{}", self.job.display(), resume_hint(last));
-            }
+            Err(e) => bail!(
+                "{}: {e}{}",
+                self.job.display(),
+                standing(&lines, &journal)
+            ),
         };
         if let Some(stop) = &out.stop {
-            let last = sender::journal_last(&journal).ok();
             bail!(
                 "{}: {}{}",
                 self.job.display(),
                 stop.describe(),
-                resume_hint(last)
+                standing(&lines, &journal)
             );
         }
         Ok((out, lines.len() - start))
@@ -105,16 +122,16 @@ impl SendJob {
 
     /// Index of the first job line to send.
     fn start(&self, lines: &[JobLine]) -> Result<usize> {
-        let after = match (&self.resume, self.resume_from) {
+        let from = match (&self.resume, self.resume_from) {
             (Some(_), Some(_)) => bail!("--resume and --resume-from: give one"),
-            (Some(j), None) => sender::journal_last(j)? + 1,
+            (Some(j), None) => return resume_point(lines, j),
             (None, Some(n)) => n,
             (None, None) => return Ok(0),
         };
-        match lines.iter().position(|l| l.number >= after) {
+        match lines.iter().position(|l| l.number >= from) {
             Some(k) => Ok(k),
             None => bail!(
-                "{}: nothing left to send from line {after} (the job has {} lines)",
+                "{}: nothing left to send from line {from} (the job has {} lines)",
                 self.job.display(),
                 lines.last().map_or(0, |l| l.number)
             ),

@@ -4,6 +4,7 @@
 
 pub mod job;
 pub mod port;
+pub mod resume;
 pub mod sender;
 pub mod sim;
 

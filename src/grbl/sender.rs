@@ -7,10 +7,12 @@
 use super::port::Port;
 use super::{alarm_meaning, error_meaning, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS};
 use crate::bail;
-use crate::error::{Context, Result};
+use crate::error::Result;
+use super::resume::{Journal, Tracker};
+use crate::gcode::modal::Modal;
 use crate::gcode::parse::{parse_line, strip};
+use glam::DVec3;
 use std::collections::VecDeque;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -23,6 +25,19 @@ pub struct JobLine {
     pub text: String,
     /// The file's line as written, for messages.
     pub original: String,
+    /// relievo reads the line (else GRBL may still take it; the sender
+    /// then cannot vouch for running it twice).
+    pub known: bool,
+    /// Its move along the axis it moves most, mm (infinite for an arc,
+    /// 0 without motion): a move of a motor step or more is sure to take
+    /// a planner block.
+    pub travel: f64,
+    /// GRBL empties its planner before it answers the line.
+    pub sync: bool,
+    /// It moves in G91: running it twice moves twice.
+    pub relative: bool,
+    /// Seconds of dwell.
+    pub dwell: f64,
 }
 
 /// The lines of a job that carry anything for GRBL.
@@ -30,6 +45,7 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
     let what = path.display().to_string();
     let text = crate::input::read_text(path, crate::input::MAX_FILE)?;
     let mut out = Vec::new();
+    let mut modal = Modal::new(DVec3::ZERO);
     for (k, l) in text.lines().enumerate() {
         let s = strip(l);
         if s.is_empty() {
@@ -54,10 +70,23 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
                 s.len()
             );
         }
+        let step = parse_line(&s, k + 1)
+            .ok()
+            .and_then(|p| modal.apply(&p).ok());
+        let travel = step.as_ref().map_or(0.0, |st| match st.to {
+            Some(_) if st.motion >= 2 => f64::INFINITY,
+            Some(to) => (to - st.from).abs().max_element(),
+            None => 0.0,
+        });
         out.push(JobLine {
             number: k + 1,
             text: s,
             original: l.trim().to_string(),
+            known: step.is_some(),
+            travel,
+            sync: step.as_ref().is_some_and(|st| st.sync),
+            relative: step.as_ref().is_some_and(|st| st.relative),
+            dwell: step.and_then(|st| st.dwell).unwrap_or(0.0),
         });
     }
     if out.is_empty() {
@@ -76,10 +105,21 @@ pub struct Options {
     pub poll_hz: f64,
     /// Seconds to wait for the welcome before a soft reset.
     pub welcome_timeout: f64,
-    /// Journal of acknowledged job lines.
+    /// Journal of sent, acknowledged and executed job lines.
     pub journal: Option<PathBuf>,
     /// Progress bar / log lines on stderr.
     pub progress: bool,
+    /// Seconds without an answer (`ok`, `error`, alarm or status report)
+    /// that mean the link is dead.
+    pub link_timeout: f64,
+    /// Seconds the machine may stay in Hold (or Door) before the sender
+    /// gives up, stops the spindle and says so.
+    pub hold_limit: f64,
+    /// GRBL's planner blocks (from a status report's `Bf:` when idle).
+    pub planner: usize,
+    /// The shortest move sure to take a planner block: a step of the
+    /// coarsest axis ($100-$102), since GRBL drops a move of no steps.
+    pub min_move: f64,
 }
 
 impl Default for Options {
@@ -91,6 +131,10 @@ impl Default for Options {
             welcome_timeout: 2.5,
             journal: None,
             progress: false,
+            link_timeout: 10.0,
+            hold_limit: 600.0,
+            planner: super::sim::PLANNER_BLOCKS,
+            min_move: MIN_MOVE,
         }
     }
 }
@@ -110,6 +154,8 @@ pub enum Stop {
         code: u32,
     },
     Cancelled,
+    /// The machine stayed in Hold longer than the limit.
+    Held { seconds: f64 },
 }
 
 impl Stop {
@@ -125,6 +171,10 @@ impl Stop {
                 line.map_or(String::new(), |l| format!(" at job line {l}"))
             ),
             Stop::Cancelled => "stopped by the operator: feed hold, spindle stopped".into(),
+            Stop::Held { seconds } => format!(
+                "the machine stayed in Hold for {seconds:.0} s (a hold button, an open door?): \
+                 streaming stopped and the spindle was stopped"
+            ),
         }
     }
 }
@@ -203,8 +253,10 @@ impl<'a> Replies<'a> {
             while self.port.now() < until {
                 if let Some(l) = self.next(until - self.port.now())? {
                     if l.starts_with("Grbl ") {
-                        // and whatever follows it at once ([MSG:..])
-                        while self.next(0.05)?.is_some() {}
+                        // and whatever follows it at once ([MSG:..]), for
+                        // half a second at most: a chatty device never ends
+                        let t = self.port.now() + 0.5;
+                        while self.port.now() < t && self.next(0.05)?.is_some() {}
                         return Ok(());
                     }
                 }
@@ -213,14 +265,14 @@ impl<'a> Replies<'a> {
         bail!("no GRBL welcome within {timeout} s, not even after a soft reset")
     }
 
-    /// The machine state from a status report (None if none comes).
-    pub fn state(&mut self) -> Result<Option<String>> {
+    /// A status report (None if none comes within a second).
+    pub fn status(&mut self) -> Result<Option<Status>> {
         self.port.write_all(&[STATUS])?;
         let until = self.port.now() + 1.0;
         while self.port.now() < until {
             if let Some(l) = self.next(until - self.port.now())? {
                 if let Some(st) = parse_status(&l) {
-                    return Ok(Some(st.state));
+                    return Ok(Some(st));
                 }
             }
         }
@@ -279,9 +331,45 @@ pub fn parse_status(l: &str) -> Option<Status> {
     })
 }
 
-/// Seconds without any reply (not even to a status poll) that mean the
-/// link is dead.
-const SILENCE: f64 = 10.0;
+/// The shortest move sure to take a planner block when the controller
+/// does not tell its steps per mm: one step at 40 steps/mm (a Shapeoko's
+/// belts, the coarsest common drive).
+pub const MIN_MOVE: f64 = 0.025;
+
+/// Steps per mm from GRBL's `$$` listing, as the shortest move sure to
+/// take a planner block.
+pub fn min_move(settings: &[String]) -> Option<f64> {
+    let steps: Vec<f64> = ["$100=", "$101=", "$102="]
+        .iter()
+        .map(|k| {
+            settings
+                .iter()
+                .find_map(|l| l.strip_prefix(k)?.trim().parse::<f64>().ok())
+        })
+        .collect::<Option<_>>()?;
+    // GRBL rounds each target to whole steps, so a move of a whole step
+    // or more (along one axis) changes the rounded position however the
+    // work offset falls
+    let coarsest = steps.into_iter().fold(f64::INFINITY, f64::min);
+    (coarsest.is_finite() && coarsest > 0.0).then(|| 1.000001 / coarsest)
+}
+
+/// One thing to send: a job line (its index) or a preamble line.
+struct Item<'a> {
+    job: Option<usize>,
+    text: &'a str,
+    /// Seconds of dwell GRBL takes before it answers.
+    dwell: f64,
+}
+
+/// Seconds of G4 dwell in a preamble line.
+fn dwell_of(text: &str) -> f64 {
+    parse_line(text, 0)
+        .ok()
+        .and_then(|l| Modal::new(DVec3::ZERO).apply(&l).ok())
+        .and_then(|s| s.dwell)
+        .unwrap_or(0.0)
+}
 
 /// Stream `lines` (with `preamble` lines sent first, unjournaled).
 /// Returns when every line is acknowledged, or at the first error or
@@ -296,28 +384,25 @@ pub fn stream(
 ) -> Result<Outcome> {
     let start = r.port.now();
     let mut journal = match &opts.journal {
-        Some(p) if !check_mode => Some(std::io::BufWriter::new(
-            std::fs::OpenOptions::new()
-                .create(true)
-                .append(true)
-                .open(p)
-                .ctx(p.display().to_string())?,
-        )),
+        Some(p) if !check_mode => Some(Journal::open(p, false)?),
         _ => None,
     };
-    // what to send: the preamble (index None) and the job lines
-    let items: Vec<(Option<usize>, &str)> = preamble
+    let items: Vec<Item> = preamble
         .iter()
-        .map(|p| (None, p.as_str()))
-        .chain(
-            lines
-                .iter()
-                .enumerate()
-                .map(|(k, l)| (Some(k), l.text.as_str())),
-        )
+        .map(|p| Item {
+            job: None,
+            text: p,
+            dwell: dwell_of(p),
+        })
+        .chain(lines.iter().enumerate().map(|(k, l)| Item {
+            job: Some(k),
+            text: &l.text,
+            dwell: l.dwell,
+        }))
         .collect();
     let budget = opts.rx_buffer.saturating_sub(1).max(1);
-    let mut inflight: VecDeque<(Option<usize>, usize)> = VecDeque::new();
+    // sent, unanswered: (item, bytes)
+    let mut inflight: VecDeque<(usize, usize)> = VecDeque::new();
     let mut used = 0;
     let mut next = 0;
     let mut out = Outcome::default();
@@ -325,9 +410,12 @@ pub fn stream(
     let poll = 1.0 / opts.poll_hz.clamp(0.1, 5.0);
     let mut last_poll = f64::MIN;
     let mut idle_since: Option<f64> = None;
+    let mut hold_since: Option<f64> = None;
     let mut stop_time: Option<f64> = None;
     let mut last_reply = start;
+    let mut tracker = Tracker::new(opts.planner, opts.min_move);
     let mut progress = Progress::new(opts.progress, lines.len());
+    let mut batch = Vec::new();
     loop {
         if cancel.load(Ordering::Relaxed) && !stopping {
             r.port.write_all(&[FEED_HOLD])?;
@@ -335,8 +423,9 @@ pub fn stream(
             out.stop = Some(Stop::Cancelled);
             break;
         }
+        batch.clear();
         while !stopping && next < items.len() {
-            let len = items[next].1.len() + 1;
+            let len = items[next].text.len() + 1;
             let fits = if opts.char_counting {
                 used + len <= budget || inflight.is_empty()
             } else {
@@ -345,12 +434,22 @@ pub fn stream(
             if !fits {
                 break;
             }
-            r.port
-                .write_all(format!("{}\n", items[next].1).as_bytes())?;
+            if let (Some(j), Some(k)) = (journal.as_mut(), items[next].job) {
+                j.sent(lines[k].number)?;
+            }
+            batch.extend_from_slice(items[next].text.as_bytes());
+            batch.push(b'\n');
             out.bytes += len;
-            inflight.push_back((items[next].0, len));
+            inflight.push_back((next, len));
             used += len;
             next += 1;
+        }
+        if !batch.is_empty() {
+            // the journal knows a line is sent before the wire does
+            if let Some(j) = journal.as_mut() {
+                j.flush()?;
+            }
+            r.port.write_all(&batch)?;
         }
         if inflight.is_empty() && (next == items.len() || stopping) {
             break;
@@ -362,9 +461,10 @@ pub fn stream(
             break;
         }
         // status polls are answered even in a hold: silence is a dead link
-        if now - last_reply > SILENCE {
+        if now - last_reply > opts.link_timeout {
             bail!(
-                "no reply from GRBL for {SILENCE} s with {} line(s) unacknowledged (link down?)",
+                "no answer from GRBL for {} s with {} line(s) unacknowledged (link down?)",
+                opts.link_timeout,
                 inflight.len()
             );
         }
@@ -375,16 +475,17 @@ pub fn stream(
         let Some(l) = r.next(poll / 2.0)? else {
             continue;
         };
-        last_reply = r.port.now();
+        let job_line = |item: usize| items[item].job.map(|k| lines[k].number);
         if l == "ok" || l.starts_with("error:") {
-            let Some((idx, len)) = inflight.pop_front() else {
+            last_reply = r.port.now();
+            let Some((item, len)) = inflight.pop_front() else {
                 continue; // a reply to nothing of ours
             };
             used -= len;
             idle_since = None;
             if let Some(code) = l.strip_prefix("error:") {
                 let code = code.trim().parse().unwrap_or(0);
-                let (line, text) = match idx {
+                let (line, text) = match items[item].job {
                     Some(k) => (lines[k].number, lines[k].original.clone()),
                     None => (0, "(resume preamble)".into()),
                 };
@@ -396,38 +497,58 @@ pub fn stream(
                     stopping = true;
                     out.stop = Some(e);
                 }
-            } else if let Some(k) = idx {
+            } else if let Some(k) = items[item].job {
                 out.acked += 1;
                 progress.set(k + 1, None);
                 if let Some(j) = journal.as_mut() {
-                    writeln!(j, "{}", lines[k].number).ctx("journal")?;
+                    j.acked(lines[k].number)?;
+                    if let Some(e) = tracker.acked(lines, k) {
+                        j.executed(lines[e].number)?;
+                    }
                 }
             }
         } else if let Some(code) = l.strip_prefix("ALARM:") {
             let code = code.trim().parse().unwrap_or(0);
-            let line = inflight.front().and_then(|f| f.0).map(|k| lines[k].number);
+            let line = inflight.front().and_then(|f| job_line(f.0));
             let a = Stop::Alarm { line, code };
             out.errors.push(a.clone());
             out.stop = Some(a);
             break;
         } else if let Some(st) = parse_status(&l) {
+            last_reply = r.port.now();
             progress.set(out.acked, Some(st.pos));
+            if let (Some(j), Some((blocks, _))) = (journal.as_mut(), st.free) {
+                if let Some(e) = tracker.status(blocks) {
+                    j.executed(lines[e].number)?;
+                }
+            }
+            if st.state.starts_with("Hold") || st.state.starts_with("Door") {
+                let since = *hold_since.get_or_insert(now);
+                if now - since > opts.hold_limit && !stopping {
+                    r.port.write_all(&[super::SPINDLE_STOP])?;
+                    out.stop = Some(Stop::Held {
+                        seconds: now - since,
+                    });
+                    break;
+                }
+            } else {
+                hold_since = None;
+            }
             // an Idle machine with an empty buffer still owing replies
-            // has lost them (a cheap adapter dropped bytes)
+            // has lost them (a cheap adapter dropped bytes); a dwell is
+            // answered when it ends
             let drained = st
                 .free
-                .is_some_and(|(p, rx)| p == super::sim::PLANNER_BLOCKS && rx >= opts.rx_buffer);
+                .is_some_and(|(p, rx)| p == opts.planner && rx >= opts.rx_buffer);
             if st.state == "Idle" && drained && !inflight.is_empty() && !check_mode {
                 let since = *idle_since.get_or_insert(now);
-                if now - since > 2.0 {
+                let grace = 2.0 + inflight.front().map_or(0.0, |f| items[f.0].dwell);
+                if now - since > grace {
                     bail!(
                         "GRBL is idle with an empty buffer but {} line(s) are unacknowledged \
                          (replies lost on the link); stopped at job line {}",
                         inflight.len(),
-                        inflight
-                            .front()
-                            .and_then(|f| f.0)
-                            .map_or(0, |k| lines[k].number)
+                        inflight.front().and_then(|f| job_line(f.0)).unwrap_or(0)
                     );
                 }
             } else {
@@ -437,11 +558,11 @@ pub fn stream(
             bail!("GRBL reset during the job (power or a soft reset); nothing more was sent");
         }
         if let Some(j) = journal.as_mut() {
-            j.flush().ctx("journal")?;
+            j.flush()?;
         }
     }
     if let Some(j) = journal.as_mut() {
-        j.flush().ctx("journal")?;
+        j.flush()?;
     }
     if stopping {
         // a refused job must not leave the spindle turning: once the hold
@@ -492,94 +613,6 @@ pub fn check(r: &mut Replies, lines: &[JobLine], opts: &Options) -> Result<Vec<S
     r.command("$C", 5.0)?;
     r.handshake(opts.welcome_timeout)?;
     Ok(o.errors)
-}
-
-/// The last job line a journal records as acknowledged.
-pub fn journal_last(path: &Path) -> Result<usize> {
-    let what = path.display().to_string();
-    let text = crate::input::read_text(path, crate::input::MAX_FILE)?;
-    let mut last = None;
-    for (k, l) in text.lines().enumerate() {
-        let l = l.trim();
-        if l.is_empty() {
-            continue;
-        }
-        last =
-            Some(l.parse::<usize>().map_err(|_| {
-                crate::Error(format!("{what}: line {}: not a job line number", k + 1))
-            })?);
-    }
-    last.ok_or_else(|| crate::Error(format!("{what}: the journal is empty")))
-}
-
-/// Lines that put the machine back where the job was before `lines[from]`:
-/// units, distance mode, spindle, up to the job's safe height, over the
-/// point, down at the plunge feed, then the job's feed.
-pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
-    let mut inches = false;
-    let mut absolute = true;
-    let mut feed: Option<f64> = None;
-    let mut spindle: Option<(u8, f64)> = None;
-    let mut s_word = 0.0;
-    let mut pos = [0.0f64; 3];
-    let mut top = 0.0f64;
-    for l in lines {
-        let Ok(p) = parse_line(&l.text, l.number) else {
-            continue;
-        };
-        if let Some(z) = p.words.iter().find(|w| w.0 == 'Z') {
-            top = top.max(z.1);
-        }
-    }
-    for l in &lines[..from] {
-        let Ok(p) = parse_line(&l.text, l.number) else {
-            continue;
-        };
-        let scale = if inches { 25.4 } else { 1.0 };
-        for &(c, v) in &p.words {
-            match (c, v as i32) {
-                ('G', 20) => inches = true,
-                ('G', 21) => inches = false,
-                ('G', 90) => absolute = true,
-                ('G', 91) => absolute = false,
-                ('M', 3) | ('M', 4) => spindle = Some((v as u8, s_word)),
-                ('M', 5) => spindle = None,
-                ('F', _) => feed = Some(v * scale),
-                ('S', _) => {
-                    s_word = v;
-                    if let Some(sp) = spindle.as_mut() {
-                        sp.1 = v;
-                    }
-                }
-                _ => {}
-            }
-        }
-        for (k, a) in ['X', 'Y', 'Z'].into_iter().enumerate() {
-            if let Some(w) = p.words.iter().rev().find(|w| w.0 == a) {
-                let v = w.1 * scale;
-                pos[k] = if absolute { v } else { pos[k] + v };
-            }
-        }
-    }
-    let safe = top.max(pos[2]).max(5.0);
-    let n = |v: f64| crate::gcode::emit::num(v);
-    let mut out = vec!["G21G90".to_string()];
-    if let Some((m, s)) = spindle {
-        out.push(format!("M{m}S{}", n(s)));
-        out.push("G4P2".into());
-    }
-    out.push(format!("G0Z{}", n(safe)));
-    out.push(format!("G0X{}Y{}", n(pos[0]), n(pos[1])));
-    let f = feed.unwrap_or(300.0);
-    out.push(format!("G1Z{}F{}", n(pos[2]), n(f.min(300.0))));
-    out.push(format!("F{}", n(f)));
-    if inches {
-        out.push("G20".into());
-    }
-    if !absolute {
-        out.push("G91".into());
-    }
-    out
 }
 
 /// Progress on stderr: a bar on a terminal, a log line every 5 s otherwise.

@@ -6,6 +6,7 @@
 //! the port that carries its bytes says what time it is.
 
 use super::{SOFT_RESET, WELCOME};
+use crate::gcode::modal::{Modal, Step};
 use crate::gcode::parse::{parse_line, strip};
 use crate::machine::Machine;
 use glam::DVec3;
@@ -24,18 +25,28 @@ pub struct Faults {
     pub error_at: Option<(usize, u32)>,
     /// Raise `ALARM:CODE` at line N (before its `ok`), stopping motion.
     pub alarm_at: Option<(usize, u32)>,
-    /// Drop the link after this many bytes received: later bytes are lost,
-    /// what was already received is still executed and answered.
+    /// Cut the link after this many bytes received, as a pulled cable
+    /// does: later bytes and every reply from then on are lost, while the
+    /// machine goes on executing what it had received.
     pub disconnect_after: Option<usize>,
+    /// At line N the machine goes into a feed hold that cycle start does
+    /// not release (a hold button stuck, a door left open), until a reset.
+    pub hold_at: Option<usize>,
+    /// After its welcome the machine answers nothing and only prints
+    /// `[MSG:...]` lines, ten a second (a confused or foreign firmware).
+    pub chatty: bool,
     /// Probability that a reply line gets noise bytes (non-ASCII, as a
     /// noisy USB-serial adapter produces) spliced into it.
     pub garble: f64,
 }
 
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Block {
     duration: f64,
     end: DVec3,
+    /// Its line, and the lines without motion that GRBL took after it:
+    /// they count as executed when the move completes.
+    lines: Vec<String>,
 }
 
 pub struct SimGrbl {
@@ -52,16 +63,23 @@ pub struct SimGrbl {
     alarm: Option<u32>,
     check: bool,
     out: Vec<u8>,
-    /// Position after the planned moves, and after the completed ones.
-    planned: DVec3,
+    /// Modal state after the lines taken (position: after the planned
+    /// moves), and the position after the completed moves.
+    modal: Modal,
     done: DVec3,
-    absolute: bool,
-    inches: bool,
-    feed: Option<f64>,
-    motion: u8,
     spindle: f64,
-    /// Every G-code line executed (accepted into the planner or run), in
-    /// order, as GRBL's line buffer held it.
+    /// A line that waits for the planner to empty (GRBL synchronises
+    /// before a dwell, spindle or program stop), then runs.
+    waiting: Option<String>,
+    /// The end of a dwell, and its line, answered then.
+    dwell: Option<(f64, String)>,
+    /// A feed hold that cycle start does not release (fault).
+    stuck: bool,
+    next_chatter: f64,
+    /// Every G-code line executed, in order, as GRBL's line buffer held
+    /// it: a move when it completes, a line without motion when GRBL has
+    /// acted on it. Moves lost in the planner at a reset or an alarm never
+    /// appear.
     pub log: Vec<String>,
     /// Lines refused with an error, as (line count, code).
     pub errors: Vec<(usize, u32)>,
@@ -71,6 +89,7 @@ pub struct SimGrbl {
     pub disconnected: bool,
     travel: DVec3,
     max_rate: DVec3,
+    steps: DVec3,
     /// mm/s^2 per axis, and GRBL's junction deviation ($11), mm.
     accel: DVec3,
     junction: f64,
@@ -95,13 +114,13 @@ impl SimGrbl {
             alarm: None,
             check: false,
             out: Vec::new(),
-            planned: DVec3::ZERO,
+            modal: Modal::new(DVec3::ZERO),
             done: DVec3::ZERO,
-            absolute: true,
-            inches: false,
-            feed: None,
-            motion: 0,
             spindle: 0.0,
+            waiting: None,
+            dwell: None,
+            stuck: false,
+            next_chatter: 0.0,
             log: Vec::new(),
             errors: Vec::new(),
             gcode_lines: 0,
@@ -110,6 +129,7 @@ impl SimGrbl {
             disconnected: false,
             travel: DVec3::new(m.travel.x, m.travel.y, m.travel.z),
             max_rate: DVec3::new(m.max_rate.x, m.max_rate.y, m.max_rate.z),
+            steps: DVec3::new(m.steps_per_mm.x, m.steps_per_mm.y, m.steps_per_mm.z),
             accel: DVec3::new(m.acceleration.x, m.acceleration.y, m.acceleration.z),
             junction: m.junction_deviation,
             last_dir: None,
@@ -130,22 +150,47 @@ impl SimGrbl {
         std::mem::take(&mut self.out)
     }
 
-    /// When the next block completes, if one is running.
-    pub fn next_event(&self) -> Option<f64> {
+    /// When the running block completes, if one runs.
+    fn block_due(&self) -> Option<f64> {
         (self.held_left.is_none() && !self.planner.is_empty()).then_some(self.block_end)
     }
 
-    /// Run the planner up to time `t`.
+    /// When something happens next: a block completes, a dwell ends, or
+    /// a chatty machine talks.
+    pub fn next_event(&self) -> Option<f64> {
+        [
+            self.block_due(),
+            self.dwell.as_ref().map(|d| d.0),
+            self.faults.chatty.then_some(self.next_chatter),
+        ]
+        .into_iter()
+        .flatten()
+        .reduce(f64::min)
+    }
+
+    /// Run the machine up to time `t`.
     pub fn advance(&mut self, t: f64) {
-        while let Some(end) = self.next_event() {
-            if end > t {
+        while let Some(at) = self.next_event() {
+            if at > t {
                 break;
             }
-            self.now = end;
-            let b = self.planner.pop_front().unwrap();
-            self.done = b.end;
-            if let Some(next) = self.planner.front() {
-                self.block_end = self.now + next.duration;
+            self.now = at;
+            if self.block_due().is_some_and(|e| e <= at) {
+                let b = self.planner.pop_front().unwrap();
+                self.done = b.end;
+                self.log.extend(b.lines);
+                if let Some(next) = self.planner.front() {
+                    self.block_end = self.now + next.duration;
+                }
+            }
+            if self.dwell.as_ref().is_some_and(|d| d.0 <= at) {
+                let (_, line) = self.dwell.take().unwrap();
+                self.log.push(line);
+                self.say("ok");
+            }
+            if self.faults.chatty && self.next_chatter <= at {
+                self.next_chatter = at + 0.1;
+                self.say("[MSG:Pgm End]");
             }
             self.pump();
         }
@@ -166,6 +211,9 @@ impl SimGrbl {
             self.disconnected = true;
             return;
         }
+        if self.faults.chatty {
+            return;
+        }
         match b {
             b'?' => {
                 let r = self.status();
@@ -176,7 +224,7 @@ impl SimGrbl {
                     self.held_left = Some((self.block_end - self.now).max(0.0));
                 }
             }
-            b'~' => {
+            b'~' if !self.stuck => {
                 if let Some(left) = self.held_left.take() {
                     self.block_end = self.now + left;
                 }
@@ -206,12 +254,11 @@ impl SimGrbl {
         self.planner.clear();
         self.last_dir = None;
         self.held_left = None;
+        self.stuck = false;
+        self.waiting = None;
+        self.dwell = None;
         self.check = false;
-        self.planned = self.done;
-        self.feed = None;
-        self.motion = 0;
-        self.absolute = true;
-        self.inches = false;
+        self.modal = Modal::new(self.done);
         self.spindle = 0.0;
         if moving {
             self.alarm = Some(3);
@@ -233,7 +280,7 @@ impl SimGrbl {
     fn status(&self) -> String {
         let state = if self.alarm.is_some() {
             "Alarm"
-        } else if self.held_left.is_some() {
+        } else if self.held_left.is_some() || self.stuck {
             "Hold:0"
         } else if self.check {
             "Check"
@@ -250,12 +297,15 @@ impl SimGrbl {
             p.z,
             PLANNER_BLOCKS - self.planner.len(),
             self.rx_size - self.rx.len(),
-            self.feed.unwrap_or(0.0).round(),
+            self.modal.feed.unwrap_or(0.0).round(),
             self.spindle.round()
         )
     }
 
     fn say(&mut self, line: &str) {
+        if self.disconnected {
+            return; // the wire is gone
+        }
         let mut bytes = line.as_bytes().to_vec();
         if self.faults.garble > 0.0 && self.random() < self.faults.garble {
             let at = (self.random() * bytes.len() as f64) as usize;
@@ -274,9 +324,24 @@ impl SimGrbl {
     }
 
     /// Take complete lines from the receive buffer while the planner has
-    /// room, as GRBL's main loop does.
+    /// room and nothing holds the main loop (a dwell, a line waiting for
+    /// the planner to empty), as GRBL's main loop does.
     fn pump(&mut self) {
-        while self.planner.len() < PLANNER_BLOCKS {
+        loop {
+            if self.dwell.is_some() {
+                return;
+            }
+            if let Some(line) = self.waiting.take() {
+                if !self.planner.is_empty() {
+                    self.waiting = Some(line);
+                    return;
+                }
+                self.run(line);
+                continue;
+            }
+            if self.planner.len() >= PLANNER_BLOCKS {
+                return;
+            }
             let Some(end) = self.rx.iter().position(|&b| b == b'\n') else {
                 return;
             };
@@ -311,27 +376,65 @@ impl SimGrbl {
                 return self.say("ok");
             }
         }
-        match self.interpret(&line) {
-            Err(code) => self.error(code),
-            Ok(None) => {
-                if !self.check {
-                    self.log.push(line);
-                }
-                self.say("ok")
+        if !self.planner.is_empty() && self.syncs(&line) {
+            self.waiting = Some(line);
+        } else {
+            self.run(line);
+        }
+        if self.faults.hold_at == Some(n) {
+            self.stuck = true;
+            if self.held_left.is_none() && !self.planner.is_empty() {
+                self.held_left = Some((self.block_end - self.now).max(0.0));
             }
-            Ok(Some(target)) => {
+        }
+    }
+
+    /// Whether GRBL empties its planner before acting on `line`.
+    fn syncs(&self, line: &str) -> bool {
+        parse_line(line, 0)
+            .ok()
+            .and_then(|l| self.modal.clone().apply(&l).ok())
+            .is_some_and(|s| s.sync)
+    }
+
+    /// Act on a G-code line and answer it (a dwell answers when it ends).
+    fn run(&mut self, line: String) {
+        let step = match self.interpret(&line) {
+            Err(code) => return self.error(code),
+            Ok(s) => s,
+        };
+        if !self.check && line.contains(['M', 'S']) {
+            self.spindle = match self.modal.spindle {
+                Some(_) => self.modal.speed.max(1.0),
+                None => 0.0,
+            };
+        }
+        if let Some(p) = step.dwell.filter(|_| !self.check) {
+            self.dwell = Some((self.now + p, line));
+            return;
+        }
+        match step.to {
+            Some(to) => {
                 let lim = self.travel;
-                if (0..3).any(|k| target[k].abs() > lim[k] + 1e-9) {
+                if (0..3).any(|k| to[k].abs() > lim[k] + 1e-9) {
                     self.raise(2);
                     return self.say("ok");
                 }
                 if !self.check {
-                    self.queue(target);
-                    self.log.push(line);
+                    self.queue(step.from, to, line);
                 }
-                self.planned = target;
-                self.say("ok")
             }
+            None if !self.check => self.note(line),
+            None => {}
+        }
+        self.say("ok")
+    }
+
+    /// A line without motion is executed once the moves before it are.
+    fn note(&mut self, line: String) {
+        match self.planner.back_mut() {
+            Some(b) => b.lines.push(line),
+            None => self.log.push(line),
         }
     }
 
@@ -345,7 +448,9 @@ impl SimGrbl {
         self.planner.clear();
         self.last_dir = None;
         self.held_left = None;
-        self.planned = self.done;
+        self.waiting = None;
+        self.dwell = None;
+        self.modal.pos = self.done;
         self.alarm = Some(code);
         self.say(&format!("ALARM:{code}"));
     }
@@ -354,11 +459,12 @@ impl SimGrbl {
     /// form: it enters at the junction speed its corner with the previous
     /// move allows (junction deviation, as GRBL computes it), never faster
     /// than the previous move got, and accelerates toward its rate.
-    fn queue(&mut self, target: DVec3) {
-        let d = target - self.planned;
+    fn queue(&mut self, from: DVec3, target: DVec3, line: String) {
+        let d = target - from;
         let dist = d.length();
-        if dist <= 0.0 {
-            return;
+        // GRBL plans in whole steps and drops a block of none
+        if (from * self.steps).round() == (target * self.steps).round() {
+            return self.note(line);
         }
         let u = d / dist;
         // the slowest axis' rate and acceleration along the move
@@ -369,10 +475,10 @@ impl SimGrbl {
                 .fold(f64::INFINITY, f64::min)
         };
         let top = along(self.max_rate) / 60.0;
-        let v = if self.motion == 0 {
+        let v = if self.modal.motion == 0 {
             top
         } else {
-            (self.feed.unwrap_or(1.0) / 60.0).min(top)
+            (self.modal.feed.unwrap_or(1.0) / 60.0).min(top)
         };
         let a = along(self.accel);
         let entry = match (self.planner.is_empty(), self.last_dir) {
@@ -407,56 +513,19 @@ impl SimGrbl {
         self.planner.push_back(Block {
             duration,
             end: target,
+            lines: vec![line],
         });
     }
 
-    /// Modal state and the target of a motion line; GRBL's error code for
-    /// what it refuses.
-    fn interpret(&mut self, line: &str) -> Result<Option<DVec3>, u32> {
+    /// Fold a line into the modal state; GRBL's error code for what it
+    /// refuses.
+    fn interpret(&mut self, line: &str) -> Result<Step, u32> {
         let l = match parse_line(line, 0) {
             Ok(l) => l,
             Err(e) if e.0.contains("unsupported") => return Err(20),
             Err(_) => return Err(2),
         };
-        let scale = |inches: bool| if inches { 25.4 } else { 1.0 };
-        let mut motion = None;
-        for &(c, v) in &l.words {
-            match (c, v as i32) {
-                ('G', 0..=3) => motion = Some(v as u8),
-                ('G', 20) => self.inches = true,
-                ('G', 21) => self.inches = false,
-                ('G', 90) => self.absolute = true,
-                ('G', 91) => self.absolute = false,
-                ('M', 3) | ('M', 4) => self.spindle = self.spindle.max(1.0),
-                ('M', 5) => self.spindle = 0.0,
-                ('F', _) => {
-                    if v <= 0.0 {
-                        return Err(4);
-                    }
-                    self.feed = Some(v * scale(self.inches));
-                }
-                ('S', _) => self.spindle = v,
-                _ => {}
-            }
-        }
-        if let Some(m) = motion {
-            self.motion = m;
-        }
-        let axes = ['X', 'Y', 'Z'].map(|a| l.words.iter().rev().find(|w| w.0 == a).map(|w| w.1));
-        if axes.iter().all(Option::is_none) {
-            return Ok(None);
-        }
-        if self.motion >= 1 && self.feed.is_none() {
-            return Err(22);
-        }
-        let mut t = self.planned;
-        for (k, v) in axes.iter().enumerate() {
-            if let Some(v) = v {
-                let v = v * scale(self.inches);
-                t[k] = if self.absolute { v } else { t[k] + v };
-            }
-        }
-        Ok(Some(t))
+        self.modal.apply(&l).map_err(|r| r.code)
     }
 
     fn system(&mut self, cmd: &str) {
@@ -484,13 +553,17 @@ impl SimGrbl {
                 }
                 self.alarm = None;
                 self.done = DVec3::ZERO;
-                self.planned = DVec3::ZERO;
+                self.modal.pos = DVec3::ZERO;
                 self.say("ok");
             }
             "$" => {
                 let t = self.travel;
                 let r = self.max_rate;
+                let s = self.steps;
                 for (k, v) in [
+                    (100, s.x),
+                    (101, s.y),
+                    (102, s.z),
                     (110, r.x),
                     (111, r.y),
                     (112, r.z),
@@ -505,12 +578,12 @@ impl SimGrbl {
             "G" => {
                 let s = format!(
                     "[GC:G{} G54 G17 {} {} G94 M{} M9 T0 F{} S{}]",
-                    self.motion,
-                    if self.inches { "G20" } else { "G21" },
-                    if self.absolute { "G90" } else { "G91" },
-                    if self.spindle > 0.0 { 3 } else { 5 },
-                    self.feed.unwrap_or(0.0),
-                    self.spindle
+                    self.modal.motion,
+                    if self.modal.inches { "G20" } else { "G21" },
+                    if self.modal.absolute { "G90" } else { "G91" },
+                    self.modal.spindle.unwrap_or(5),
+                    self.modal.feed.unwrap_or(0.0),
+                    self.modal.speed
                 );
                 self.say(&s);
                 self.say("ok");
