@@ -229,15 +229,14 @@ fn disconnect_then_resume_from_the_journal() {
         "{e}"
     );
     let rec = relievo::grbl::resume::Record::read(&j.journal_path()).unwrap();
-    let (executed, acked, sent) = (
-        rec.executed.unwrap(),
-        rec.acked.unwrap(),
-        rec.sent.unwrap(),
-    );
+    let (executed, acked, sent) = (rec.executed.unwrap(), rec.acked.unwrap(), rec.sent.unwrap());
     assert!(executed < acked && acked < sent, "{rec:?}");
     // what the journal says ran did run, at the moment of the cut
     let ran_at_cut = p.sim.log.len();
-    assert!(ran_at_cut >= executed - 1, "{ran_at_cut} ran, journal {executed}");
+    assert!(
+        ran_at_cut >= executed - 1,
+        "{ran_at_cut} ran, journal {executed}"
+    );
     // reconnect at once: the board resets in motion and raises ALARM:3;
     // the sender refuses to resume into an alarm; the operator unlocks
     p.reconnect();
@@ -256,7 +255,10 @@ fn disconnect_then_resume_from_the_journal() {
         assert_eq!(r.command("$X", 5.0).unwrap().last().unwrap(), "ok");
     }
     let lost = p.sim.log.len();
-    assert!(lost < acked - 1, "acknowledged lines were lost in the reset");
+    assert!(
+        lost < acked - 1,
+        "acknowledged lines were lost in the reset"
+    );
     SendJob {
         resume: Some(j.journal_path()),
         ..job(&path)
@@ -267,7 +269,7 @@ fn disconnect_then_resume_from_the_journal() {
     let (a, s) = runs(&p.sim.log, &lines);
     eprintln!(
         "cut after {sent} sent, {acked} acknowledged, {executed} known run (file lines); the \
-         reset lost the queued moves: {a} lines ran; resumed at line {s}: {} lines ran twice",
+         reset lost the queued moves: {a} job lines had run; the resume ran {} of them again",
         a - s
     );
     std::fs::remove_dir_all(d).unwrap();
@@ -281,7 +283,10 @@ fn a_relative_job_is_refused_inside_its_doubt() {
     let path = d.join("g91.nc");
     let mut text = String::from("G21 G90\nG0 X10 Y10\nG91\n");
     for k in 0..400 {
-        text.push_str(&format!("G1 X{} F3000\n", if k % 2 == 0 { 0.5 } else { -0.5 }));
+        text.push_str(&format!(
+            "G1 X{} F3000\n",
+            if k % 2 == 0 { 0.5 } else { -0.5 }
+        ));
     }
     std::fs::write(&path, text).unwrap();
     let mut p = port(Faults {
@@ -300,7 +305,9 @@ fn a_relative_job_is_refused_inside_its_doubt() {
     .run(&mut p, &no)
     .unwrap_err();
     assert!(
-        e.0.contains("cannot resume safely") && e.0.contains("G91") && e.0.contains("--resume-from"),
+        e.0.contains("cannot resume safely")
+            && e.0.contains("G91")
+            && e.0.contains("--resume-from"),
         "{e}"
     );
     std::fs::remove_dir_all(d).unwrap();

@@ -103,11 +103,7 @@ impl SendJob {
         };
         let out = match sender::stream(&mut r, &lines[start..], &preamble, &opts, false, cancel) {
             Ok(o) => o,
-            Err(e) => bail!(
-                "{}: {e}{}",
-                self.job.display(),
-                standing(&lines, &journal)
-            ),
+            Err(e) => bail!("{}: {e}{}", self.job.display(), standing(&lines, &journal)),
         };
         if let Some(stop) = &out.stop {
             bail!(

@@ -120,7 +120,10 @@ pub fn doubt(lines: &[JobLine], r: &Record) -> (usize, usize) {
         .position(|l| r.executed.is_none_or(|e| l.number > e))
         .unwrap_or(lines.len());
     let end = match r.reached() {
-        Some(s) => lines.iter().rposition(|l| l.number <= s).map_or(0, |k| k + 1),
+        Some(s) => lines
+            .iter()
+            .rposition(|l| l.number <= s)
+            .map_or(0, |k| k + 1),
         None => 0,
     };
     (start, end)

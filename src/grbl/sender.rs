@@ -5,10 +5,10 @@
 //! lines, and a safe re-entry to resume from one.
 
 use super::port::Port;
+use super::resume::{Journal, Tracker};
 use super::{alarm_meaning, error_meaning, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS};
 use crate::bail;
 use crate::error::Result;
-use super::resume::{Journal, Tracker};
 use crate::gcode::modal::Modal;
 use crate::gcode::parse::{parse_line, strip};
 use glam::DVec3;
@@ -155,7 +155,9 @@ pub enum Stop {
     },
     Cancelled,
     /// The machine stayed in Hold longer than the limit.
-    Held { seconds: f64 },
+    Held {
+        seconds: f64,
+    },
 }
 
 impl Stop {
