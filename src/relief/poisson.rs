@@ -249,7 +249,7 @@ impl Level {
 #[inline]
 fn parents(i: usize, n: usize) -> [(usize, f64); 2] {
     let c = i / 2;
-    let other = if i % 2 == 0 {
+    let other = if i.is_multiple_of(2) {
         c.saturating_sub(1)
     } else {
         (c + 1).min(n - 1)
