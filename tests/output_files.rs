@@ -101,7 +101,10 @@ fn concurrent_runs_never_leave_a_mismatched_pair() {
                 Some("left") => &left,
                 v => panic!("sidecar view {v:?}"),
             };
-            assert!(&png == want, "a PNG beside another run's sidecar was accepted");
+            assert!(
+                &png == want,
+                "a PNG beside another run's sidecar was accepted"
+            );
         } else {
             assert!(err.contains("not the PNG its sidecar"), "{err}");
             refused += 1;

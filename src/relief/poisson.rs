@@ -149,98 +149,203 @@ impl Level {
         (edge(xx, self.w) + edge(y, self.h)) as f64
     }
 
-    /// For each pixel of row `y`: f(column, (A x)_i, diagonal_i), unknowns only.
-    #[inline]
-    fn row(&self, x: &[f64], y: usize, mut f: impl FnMut(usize, f64, f64)) {
-        let (w, h) = (self.w, self.h);
-        let base = y * w;
-        for xx in 0..w {
-            let i = base + xx;
-            if !self.unknown[i] {
-                continue;
-            }
-            let mut s = 0.0;
+    /// Row `y` of A x into `ax` (unmasked: x is 0 off the unknowns and
+    /// the callers mask), from that row of x and the rows above and below
+    /// (None at the grid's edge); returns whether the row is inside the
+    /// grid, where every pixel but the two end ones has 4 neighbours.
+    /// Inside it is one straight loop the compiler vectorises.
+    fn ax_rows(
+        &self,
+        up: Option<&[f64]>,
+        mid: &[f64],
+        down: Option<&[f64]>,
+        ax: &mut Vec<f64>,
+    ) -> bool {
+        let w = self.w;
+        ax.resize(w, 0.0);
+        let end = |xx: usize| {
+            let mut s = up.map_or(0.0, |u| u[xx]) + down.map_or(0.0, |v| v[xx]);
             if xx > 0 {
-                s += x[i - 1];
+                s += mid[xx - 1];
             }
             if xx + 1 < w {
-                s += x[i + 1];
+                s += mid[xx + 1];
             }
-            if y > 0 {
-                s += x[i - w];
+            let d = (xx > 0) as u8 + (xx + 1 < w) as u8 + up.is_some() as u8 + down.is_some() as u8;
+            d as f64 * mid[xx] - s
+        };
+        let (Some(up), Some(down), true) = (up, down, w >= 3) else {
+            for (xx, a) in ax.iter_mut().enumerate() {
+                *a = end(xx);
             }
-            if y + 1 < h {
-                s += x[i + w];
+            return false;
+        };
+        let sides = mid[..w - 2].iter().zip(&mid[2..]);
+        for ((((a, c), (l, r)), u), d) in ax[1..w - 1]
+            .iter_mut()
+            .zip(&mid[1..w - 1])
+            .zip(sides)
+            .zip(&up[1..w - 1])
+            .zip(&down[1..w - 1])
+        {
+            *a = 4.0 * c - l - r - u - d;
+        }
+        ax[0] = end(0);
+        ax[w - 1] = end(w - 1);
+        true
+    }
+
+    /// Row `y` of A x into `ax`; see `ax_rows`.
+    fn ax_row(&self, x: &[f64], y: usize, ax: &mut Vec<f64>) -> bool {
+        let w = self.w;
+        let row = |y: usize| &x[y * w..(y + 1) * w];
+        let up = (y > 0).then(|| row(y - 1));
+        let down = (y + 1 < self.h).then(|| row(y + 1));
+        self.ax_rows(up, row(y), down, ax)
+    }
+
+    /// Fill row `y` of `o` with f(x_i, r_i, (A x)_i, 1 / diagonal_i) on
+    /// the unknowns and 0 elsewhere.
+    #[inline]
+    fn combine(
+        &self,
+        y: usize,
+        o: &mut [f64],
+        (x, r, ax): (&[f64], &[f64], &[f64]),
+        inside: bool,
+        f: impl Fn(f64, f64, f64, f64) -> f64,
+    ) {
+        let w = self.w;
+        let m = &self.unknown[y * w..(y + 1) * w];
+        for ((((o, xi), ri), a), k) in o.iter_mut().zip(x).zip(r).zip(ax).zip(m) {
+            let v = f(*xi, *ri, *a, 0.25);
+            *o = if *k { v } else { 0.0 };
+        }
+        // the border pixels have fewer neighbours
+        let mut fix = |xx: usize| {
+            if m[xx] {
+                o[xx] = f(x[xx], r[xx], ax[xx], 1.0 / self.degree(xx, y));
             }
-            let d = self.degree(xx, y);
-            f(xx, d * x[i] - s, d);
+        };
+        if inside {
+            fix(0);
+            fix(w - 1);
+        } else {
+            (0..w).for_each(fix);
         }
     }
 
-    /// out = A x (0 at non-unknowns); returns x . A x.
-    fn apply_dot(&self, x: &[f64], out: &mut [f64]) -> f64 {
-        out.par_chunks_mut(self.w)
-            .with_min_len(self.min_rows())
+    /// Row `y` of each of the named vectors.
+    #[inline]
+    fn rows<'v, const N: usize>(&self, y: usize, v: [&'v [f64]; N]) -> [&'v [f64]; N] {
+        v.map(|v| &v[y * self.w..(y + 1) * self.w])
+    }
+
+    /// CG's step of its search direction and its product with A in one
+    /// pass: `pn` = z + beta p, `ap` = A pn; returns pn . A pn. A task
+    /// takes a run of rows and makes each row of pn once, as it is needed.
+    fn step_apply(&self, z: &[f64], p: &[f64], beta: f64, pn: &mut [f64], ap: &mut [f64]) -> f64 {
+        let w = self.w;
+        let run = self.min_rows().max(8);
+        let make = |y: usize, buf: &mut Vec<f64>| {
+            buf.clear();
+            let (zr, pr) = (&z[y * w..(y + 1) * w], &p[y * w..(y + 1) * w]);
+            buf.extend(zr.iter().zip(pr).map(|(a, b)| a + beta * b));
+        };
+        pn.par_chunks_mut(w * run)
+            .zip(ap.par_chunks_mut(w * run))
             .enumerate()
-            .map(|(y, o)| {
-                o.fill(0.0);
-                let base = y * self.w;
-                let mut s = 0.0;
-                self.row(x, y, |c, ax, _| {
-                    o[c] = ax;
-                    s += x[base + c] * ax;
-                });
-                s
-            })
+            .map_init(
+                || [Vec::new(), Vec::new(), Vec::new(), Vec::new()],
+                |[prev, cur, next, ax], (chunk, (pnc, apc))| {
+                    let y0 = chunk * run;
+                    if y0 > 0 {
+                        make(y0 - 1, prev);
+                    }
+                    make(y0, cur);
+                    let mut sum = 0.0;
+                    for (j, (pr, ar)) in pnc.chunks_mut(w).zip(apc.chunks_mut(w)).enumerate() {
+                        let y = y0 + j;
+                        if y + 1 < self.h {
+                            make(y + 1, next);
+                        }
+                        let up = (y > 0).then_some(&prev[..]);
+                        let down = (y + 1 < self.h).then_some(&next[..]);
+                        let inside = self.ax_rows(up, cur, down, ax);
+                        self.combine(y, ar, (cur, cur, ax), inside, |_, _, a, _| a);
+                        pr.copy_from_slice(cur);
+                        sum += dot4(cur, ar);
+                        std::mem::swap(prev, cur);
+                        std::mem::swap(cur, next);
+                    }
+                    sum
+                },
+            )
             .sum()
     }
 
-    /// One damped-Jacobi sweep on A x = r: `w.t` from `w.x`, then swapped.
-    fn sweep(&self, w: &mut Work) {
+    /// One damped-Jacobi sweep on A x = r: `w.t` from `w.x`, then
+    /// swapped. Returns r . x after the sweep (CG's r . z when it is the
+    /// V-cycle's last).
+    fn sweep(&self, w: &mut Work) -> f64 {
         let (x, r) = (&w.x, &w.r);
-        w.t.par_chunks_mut(self.w)
-            .with_min_len(self.min_rows())
-            .enumerate()
-            .for_each(|(y, o)| {
-                o.fill(0.0);
-                let base = y * self.w;
-                self.row(x, y, |c, ax, d| {
-                    o[c] = x[base + c] + OMEGA * (r[base + c] - ax) / d;
-                });
-            });
+        let dot =
+            w.t.par_chunks_mut(self.w)
+                .with_min_len(self.min_rows())
+                .enumerate()
+                .map_init(Vec::new, |ax, (y, o)| {
+                    let inside = self.ax_row(x, y, ax);
+                    let [xr, rr] = self.rows(y, [x, r]);
+                    self.combine(y, o, (xr, rr, ax), inside, |xi, ri, a, inv| {
+                        xi + OMEGA * inv * (ri - a)
+                    });
+                    dot4(rr, o)
+                })
+                .sum();
         std::mem::swap(&mut w.x, &mut w.t);
+        dot
     }
 
     /// The first sweep from x = 0: x = OMEGA r / diagonal.
     fn first_sweep(&self, w: &mut Work) {
         let r = &w.r;
+        let zero = vec![0.0; self.w];
         w.x.par_chunks_mut(self.w)
             .with_min_len(self.min_rows())
             .enumerate()
             .for_each(|(y, o)| {
-                let base = y * self.w;
-                for (xx, v) in o.iter_mut().enumerate() {
-                    *v = if self.unknown[base + xx] {
-                        OMEGA * r[base + xx] / self.degree(xx, y)
-                    } else {
-                        0.0
-                    };
-                }
+                let [rr] = self.rows(y, [r]);
+                let inside = y > 0 && y + 1 < self.h && self.w >= 3;
+                self.combine(y, o, (&zero, rr, &zero), inside, |_, ri, _, inv| {
+                    OMEGA * inv * ri
+                });
             });
     }
 
-    /// `w.t` = the residual r - A x.
-    fn residual(&self, w: &mut Work) {
-        let (x, r) = (&w.x, &w.r);
-        w.t.par_chunks_mut(self.w)
-            .with_min_len(self.min_rows())
-            .enumerate()
-            .for_each(|(y, o)| {
-                o.fill(0.0);
-                let base = y * self.w;
-                self.row(x, y, |c, ax, _| o[c] = r[base + c] - ax);
-            });
+    /// Row `y` of the residual r - A x into `o`.
+    fn residual_row(&self, w: &Work, y: usize, o: &mut [f64], ax: &mut Vec<f64>) {
+        let inside = self.ax_row(&w.x, y, ax);
+        let [rr] = self.rows(y, [&w.r]);
+        self.combine(y, o, (rr, rr, ax), inside, |_, ri, a, _| ri - a);
     }
+}
+
+/// a . b with four accumulators, so that it vectorises.
+fn dot4(a: &[f64], b: &[f64]) -> f64 {
+    let mut s = [0.0; 4];
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ca
+        .remainder()
+        .iter()
+        .zip(cb.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        for k in 0..4 {
+            s[k] += x[k] * y[k];
+        }
+    }
+    s.iter().sum::<f64>() + tail
 }
 
 /// The two coarse cells a fine cell's centre lies between (cell-centred
@@ -278,65 +383,83 @@ fn children(fine: usize, n: usize) -> Vec<Vec<(usize, f64)>> {
 /// the transpose of bilinear interpolation and the correction comes back
 /// up by it, which with the coarse operator rediscretised on the coarse
 /// mask makes the coarse problem the fine one seen at half resolution.
-fn vcycle(levels: &[Level], work: &mut [Work], k: usize) {
+fn vcycle(levels: &[Level], work: &mut [Work], k: usize) -> f64 {
     let l = &levels[k];
     let (fine, coarse) = work.split_at_mut(k + 1);
     let wk = &mut fine[k];
     l.first_sweep(wk);
     if k + 1 == levels.len() {
-        for _ in 0..39 {
+        for _ in 0..38 {
             l.sweep(wk);
         }
-        return;
+        return l.sweep(wk);
     }
     l.sweep(wk);
-    l.residual(wk);
+    // the residual, restricted by the transpose of bilinear interpolation
+    // (separably: along x per fine row, then along y); a task takes a run
+    // of coarse rows and computes each fine residual row it needs once
     let c = &levels[k + 1];
-    let rows = children(l.h, c.h);
-    let cols = children(l.w, c.w);
-    let t = &wk.t;
+    let (rows, cols) = (children(l.h, c.h), children(l.w, c.w));
+    let run = c.min_rows().max(8);
+    let wk = &*wk;
     coarse[0]
         .r
-        .par_chunks_mut(c.w)
-        .with_min_len(c.min_rows())
+        .par_chunks_mut(c.w * run)
         .enumerate()
-        .for_each(|(cy, rc)| {
-            for (cx, out) in rc.iter_mut().enumerate() {
-                let mut s = 0.0;
-                if c.unknown[cy * c.w + cx] {
-                    for &(y, wy) in &rows[cy] {
-                        let base = y * l.w;
-                        for &(xx, wx) in &cols[cx] {
-                            s += wy * wx * t[base + xx];
-                        }
+        .for_each_init(
+            || (Vec::new(), Vec::new(), Vec::new()),
+            |(res, ax, hx): &mut (Vec<f64>, Vec<f64>, Vec<f64>), (chunk, out)| {
+                let cy0 = chunk * run;
+                let last = cy0 + out.len() / c.w - 1;
+                let lo = rows[cy0].iter().map(|e| e.0).min().unwrap_or(0);
+                let hi = rows[last].iter().map(|e| e.0).max().unwrap_or(0);
+                res.resize(l.w, 0.0);
+                hx.resize((hi - lo + 1) * c.w, 0.0);
+                for y in lo..=hi {
+                    l.residual_row(wk, y, res, ax);
+                    let h = &mut hx[(y - lo) * c.w..(y - lo + 1) * c.w];
+                    for (v, ch) in h.iter_mut().zip(&cols) {
+                        *v = ch.iter().map(|&(xx, wx)| wx * res[xx]).sum();
                     }
                 }
-                *out = s;
-            }
-        });
+                for (j, o) in out.chunks_mut(c.w).enumerate() {
+                    let cy = cy0 + j;
+                    let u = &c.unknown[cy * c.w..(cy + 1) * c.w];
+                    for (cx, (v, &known)) in o.iter_mut().zip(u).enumerate() {
+                        *v = if known {
+                            rows[cy]
+                                .iter()
+                                .map(|&(y, wy)| wy * hx[(y - lo) * c.w + cx])
+                                .sum()
+                        } else {
+                            0.0
+                        };
+                    }
+                }
+            },
+        );
     vcycle(levels, work, k + 1);
+    // the correction, interpolated bilinearly (separably again)
     let (fine, coarse) = work.split_at_mut(k + 1);
     let (wk, ec) = (&mut fine[k], &coarse[0].x);
+    let px: Vec<[(usize, f64); 2]> = (0..l.w).map(|xx| parents(xx, c.w)).collect();
     wk.x.par_chunks_mut(l.w)
         .with_min_len(l.min_rows())
         .enumerate()
-        .for_each(|(y, row)| {
-            let py = parents(y, c.h);
-            for (xx, v) in row.iter_mut().enumerate() {
-                if l.unknown[y * l.w + xx] {
-                    let px = parents(xx, c.w);
-                    let mut e = 0.0;
-                    for (cy, wy) in py {
-                        for (cx, wx) in px {
-                            e += wy * wx * ec[cy * c.w + cx];
-                        }
-                    }
-                    *v += e;
+        .for_each_init(Vec::new, |blend: &mut Vec<f64>, (y, row)| {
+            let [(c0, w0), (c1, w1)] = parents(y, c.h);
+            let (r0, r1) = (&ec[c0 * c.w..(c0 + 1) * c.w], &ec[c1 * c.w..(c1 + 1) * c.w]);
+            blend.clear();
+            blend.extend(r0.iter().zip(r1).map(|(a, b)| w0 * a + w1 * b));
+            let u = &l.unknown[y * l.w..(y + 1) * l.w];
+            for ((v, &known), &[(a, wa), (b, wb)]) in row.iter_mut().zip(u).zip(&px) {
+                if known {
+                    *v += wa * blend[a] + wb * blend[b];
                 }
             }
         });
     l.sweep(wk);
-    l.sweep(wk);
+    l.sweep(wk)
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -372,22 +495,22 @@ pub fn solve_masked(div: &Grid<f64>, unknown: &Grid<bool>) -> (Grid<f64>, usize)
         return (Grid::from_vec(w, h, x), 0);
     }
     let mut z = vec![0.0; w * h];
-    let mut p = vec![0.0; w * h];
+    // the search direction, and the buffer its next value is made in
+    let (mut p, mut p_old) = (vec![0.0; w * h], vec![0.0; w * h]);
     let mut ap = vec![0.0; w * h];
     let mut rz = 0.0;
     let mut it = 0;
     while it < 1000 {
         // z = M^-1 r by the V-cycle; p = z + beta p
-        vcycle(&levels, &mut work, 0);
+        let rz2 = vcycle(&levels, &mut work, 0);
         std::mem::swap(&mut z, &mut work[0].x);
-        let rz2 = dot(&work[0].r, &z);
         let beta = if it == 0 { 0.0 } else { rz2 / rz };
         rz = rz2;
-        p.par_iter_mut()
-            .zip(z.par_iter())
-            .for_each(|(pi, zi)| *pi = zi + beta * *pi);
         it += 1;
-        let alpha = rz / l0.apply_dot(&p, &mut ap);
+        let pap = l0.step_apply(&z, &p_old, beta, &mut p, &mut ap);
+        std::mem::swap(&mut p, &mut p_old);
+        let p = &p_old;
+        let alpha = rz / pap;
         let rr: f64 = x
             .par_iter_mut()
             .zip(work[0].r.par_iter_mut())
