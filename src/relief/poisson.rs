@@ -5,7 +5,10 @@
 //!   basis, so one forward and one inverse 2D transform solve it exactly.
 //! * Flat background (Dirichlet h = 0 on background pixels): conjugate
 //!   gradients preconditioned by a geometric multigrid V-cycle on the
-//!   masked grid.
+//!   masked grid (damped Jacobi, bilinear transfers, a coarse cell an
+//!   unknown when 3 of its 4 children are; f32, straight-line row kernels):
+//!   13 iterations to a 1e-6 residual at 4096 px, 1.8x the free solve's
+//!   whole run.
 //!
 //! Gradients are forward differences per pixel: gx(i,j) = h(i+1,j) - h(i,j);
 //! the last column of gx and the last row of gy are ignored (no edge there).
@@ -94,11 +97,41 @@ struct Level {
 }
 
 /// A level's work vectors, allocated once per solve: right-hand side,
-/// solution, and the other half of a Jacobi ping-pong.
+/// solution, and the other half of a Jacobi ping-pong. The V-cycle only
+/// preconditions CG (whose vectors are f64), so f32 serves, and halves
+/// the memory traffic that bounds its speed.
 struct Work {
-    r: Vec<f64>,
-    x: Vec<f64>,
-    t: Vec<f64>,
+    r: Vec<f32>,
+    x: Vec<f32>,
+    t: Vec<f32>,
+}
+
+/// The two float widths the row kernels run in.
+trait Real:
+    Copy
+    + Send
+    + Sync
+    + Into<f64>
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+    + std::ops::AddAssign
+{
+    fn of(v: f64) -> Self;
+}
+
+impl Real for f32 {
+    #[inline]
+    fn of(v: f64) -> f32 {
+        v as f32
+    }
+}
+
+impl Real for f64 {
+    #[inline]
+    fn of(v: f64) -> f64 {
+        v
+    }
 }
 
 /// Damping of the Jacobi smoother.
@@ -154,17 +187,18 @@ impl Level {
     /// (None at the grid's edge); returns whether the row is inside the
     /// grid, where every pixel but the two end ones has 4 neighbours.
     /// Inside it is one straight loop the compiler vectorises.
-    fn ax_rows(
+    fn ax_rows<T: Real>(
         &self,
-        up: Option<&[f64]>,
-        mid: &[f64],
-        down: Option<&[f64]>,
-        ax: &mut Vec<f64>,
+        up: Option<&[T]>,
+        mid: &[T],
+        down: Option<&[T]>,
+        ax: &mut Vec<T>,
     ) -> bool {
         let w = self.w;
-        ax.resize(w, 0.0);
+        ax.resize(w, T::of(0.0));
+        let zero = T::of(0.0);
         let end = |xx: usize| {
-            let mut s = up.map_or(0.0, |u| u[xx]) + down.map_or(0.0, |v| v[xx]);
+            let mut s = up.map_or(zero, |u| u[xx]) + down.map_or(zero, |v| v[xx]);
             if xx > 0 {
                 s += mid[xx - 1];
             }
@@ -172,7 +206,7 @@ impl Level {
                 s += mid[xx + 1];
             }
             let d = (xx > 0) as u8 + (xx + 1 < w) as u8 + up.is_some() as u8 + down.is_some() as u8;
-            d as f64 * mid[xx] - s
+            T::of(d as f64) * mid[xx] - s
         };
         let (Some(up), Some(down), true) = (up, down, w >= 3) else {
             for (xx, a) in ax.iter_mut().enumerate() {
@@ -188,7 +222,7 @@ impl Level {
             .zip(&up[1..w - 1])
             .zip(&down[1..w - 1])
         {
-            *a = 4.0 * c - l - r - u - d;
+            *a = T::of(4.0) * *c - *l - *r - *u - *d;
         }
         ax[0] = end(0);
         ax[w - 1] = end(w - 1);
@@ -196,7 +230,7 @@ impl Level {
     }
 
     /// Row `y` of A x into `ax`; see `ax_rows`.
-    fn ax_row(&self, x: &[f64], y: usize, ax: &mut Vec<f64>) -> bool {
+    fn ax_row<T: Real>(&self, x: &[T], y: usize, ax: &mut Vec<T>) -> bool {
         let w = self.w;
         let row = |y: usize| &x[y * w..(y + 1) * w];
         let up = (y > 0).then(|| row(y - 1));
@@ -207,24 +241,25 @@ impl Level {
     /// Fill row `y` of `o` with f(x_i, r_i, (A x)_i, 1 / diagonal_i) on
     /// the unknowns and 0 elsewhere.
     #[inline]
-    fn combine(
+    fn combine<T: Real>(
         &self,
         y: usize,
-        o: &mut [f64],
-        (x, r, ax): (&[f64], &[f64], &[f64]),
+        o: &mut [T],
+        (x, r, ax): (&[T], &[T], &[T]),
         inside: bool,
-        f: impl Fn(f64, f64, f64, f64) -> f64,
+        f: impl Fn(T, T, T, T) -> T,
     ) {
         let w = self.w;
         let m = &self.unknown[y * w..(y + 1) * w];
+        let (quarter, zero) = (T::of(0.25), T::of(0.0));
         for ((((o, xi), ri), a), k) in o.iter_mut().zip(x).zip(r).zip(ax).zip(m) {
-            let v = f(*xi, *ri, *a, 0.25);
-            *o = if *k { v } else { 0.0 };
+            let v = f(*xi, *ri, *a, quarter);
+            *o = if *k { v } else { zero };
         }
         // the border pixels have fewer neighbours
         let mut fix = |xx: usize| {
             if m[xx] {
-                o[xx] = f(x[xx], r[xx], ax[xx], 1.0 / self.degree(xx, y));
+                o[xx] = f(x[xx], r[xx], ax[xx], T::of(1.0 / self.degree(xx, y)));
             }
         };
         if inside {
@@ -237,27 +272,27 @@ impl Level {
 
     /// Row `y` of each of the named vectors.
     #[inline]
-    fn rows<'v, const N: usize>(&self, y: usize, v: [&'v [f64]; N]) -> [&'v [f64]; N] {
+    fn rows<'v, T, const N: usize>(&self, y: usize, v: [&'v [T]; N]) -> [&'v [T]; N] {
         v.map(|v| &v[y * self.w..(y + 1) * self.w])
     }
 
     /// CG's step of its search direction and its product with A in one
     /// pass: `pn` = z + beta p, `ap` = A pn; returns pn . A pn. A task
     /// takes a run of rows and makes each row of pn once, as it is needed.
-    fn step_apply(&self, z: &[f64], p: &[f64], beta: f64, pn: &mut [f64], ap: &mut [f64]) -> f64 {
+    fn step_apply(&self, z: &[f32], p: &[f64], beta: f64, pn: &mut [f64], ap: &mut [f64]) -> f64 {
         let w = self.w;
         let run = self.min_rows().max(8);
         let make = |y: usize, buf: &mut Vec<f64>| {
             buf.clear();
             let (zr, pr) = (&z[y * w..(y + 1) * w], &p[y * w..(y + 1) * w]);
-            buf.extend(zr.iter().zip(pr).map(|(a, b)| a + beta * b));
+            buf.extend(zr.iter().zip(pr).map(|(&a, b)| a as f64 + beta * b));
         };
         pn.par_chunks_mut(w * run)
             .zip(ap.par_chunks_mut(w * run))
             .enumerate()
             .map_init(
                 || [Vec::new(), Vec::new(), Vec::new(), Vec::new()],
-                |[prev, cur, next, ax], (chunk, (pnc, apc))| {
+                |[prev, cur, next, ax]: &mut [Vec<f64>; 4], (chunk, (pnc, apc))| {
                     let y0 = chunk * run;
                     if y0 > 0 {
                         make(y0 - 1, prev);
@@ -293,11 +328,12 @@ impl Level {
             w.t.par_chunks_mut(self.w)
                 .with_min_len(self.min_rows())
                 .enumerate()
-                .map_init(Vec::new, |ax, (y, o)| {
+                .map_init(Vec::new, |ax: &mut Vec<f32>, (y, o)| {
                     let inside = self.ax_row(x, y, ax);
                     let [xr, rr] = self.rows(y, [x, r]);
+                    let om = OMEGA as f32;
                     self.combine(y, o, (xr, rr, ax), inside, |xi, ri, a, inv| {
-                        xi + OMEGA * inv * (ri - a)
+                        xi + om * inv * (ri - a)
                     });
                     dot4(rr, o)
                 })
@@ -309,40 +345,41 @@ impl Level {
     /// The first sweep from x = 0: x = OMEGA r / diagonal.
     fn first_sweep(&self, w: &mut Work) {
         let r = &w.r;
-        let zero = vec![0.0; self.w];
+        let zero = vec![0.0f32; self.w];
         w.x.par_chunks_mut(self.w)
             .with_min_len(self.min_rows())
             .enumerate()
             .for_each(|(y, o)| {
                 let [rr] = self.rows(y, [r]);
                 let inside = y > 0 && y + 1 < self.h && self.w >= 3;
+                let om = OMEGA as f32;
                 self.combine(y, o, (&zero, rr, &zero), inside, |_, ri, _, inv| {
-                    OMEGA * inv * ri
+                    om * inv * ri
                 });
             });
     }
 
     /// Row `y` of the residual r - A x into `o`.
-    fn residual_row(&self, w: &Work, y: usize, o: &mut [f64], ax: &mut Vec<f64>) {
+    fn residual_row(&self, w: &Work, y: usize, o: &mut [f32], ax: &mut Vec<f32>) {
         let inside = self.ax_row(&w.x, y, ax);
         let [rr] = self.rows(y, [&w.r]);
         self.combine(y, o, (rr, rr, ax), inside, |_, ri, a, _| ri - a);
     }
 }
 
-/// a . b with four accumulators, so that it vectorises.
-fn dot4(a: &[f64], b: &[f64]) -> f64 {
+/// a . b in f64 with four accumulators, so that it vectorises.
+fn dot4<T: Real>(a: &[T], b: &[T]) -> f64 {
     let mut s = [0.0; 4];
     let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
     let tail: f64 = ca
         .remainder()
         .iter()
         .zip(cb.remainder())
-        .map(|(x, y)| x * y)
+        .map(|(&x, &y)| x.into() * y.into())
         .sum();
     for (x, y) in ca.zip(cb) {
         for k in 0..4 {
-            s[k] += x[k] * y[k];
+            s[k] += x[k].into() * y[k].into();
         }
     }
     s.iter().sum::<f64>() + tail
@@ -408,7 +445,7 @@ fn vcycle(levels: &[Level], work: &mut [Work], k: usize) -> f64 {
         .enumerate()
         .for_each_init(
             || (Vec::new(), Vec::new(), Vec::new()),
-            |(res, ax, hx): &mut (Vec<f64>, Vec<f64>, Vec<f64>), (chunk, out)| {
+            |(res, ax, hx): &mut (Vec<f32>, Vec<f32>, Vec<f32>), (chunk, out)| {
                 let cy0 = chunk * run;
                 let last = cy0 + out.len() / c.w - 1;
                 let lo = rows[cy0].iter().map(|e| e.0).min().unwrap_or(0);
@@ -419,7 +456,7 @@ fn vcycle(levels: &[Level], work: &mut [Work], k: usize) -> f64 {
                     l.residual_row(wk, y, res, ax);
                     let h = &mut hx[(y - lo) * c.w..(y - lo + 1) * c.w];
                     for (v, ch) in h.iter_mut().zip(&cols) {
-                        *v = ch.iter().map(|&(xx, wx)| wx * res[xx]).sum();
+                        *v = ch.iter().map(|&(xx, wx)| wx as f32 * res[xx]).sum();
                     }
                 }
                 for (j, o) in out.chunks_mut(c.w).enumerate() {
@@ -429,7 +466,7 @@ fn vcycle(levels: &[Level], work: &mut [Work], k: usize) -> f64 {
                         *v = if known {
                             rows[cy]
                                 .iter()
-                                .map(|&(y, wy)| wy * hx[(y - lo) * c.w + cx])
+                                .map(|&(y, wy)| wy as f32 * hx[(y - lo) * c.w + cx])
                                 .sum()
                         } else {
                             0.0
@@ -446,15 +483,15 @@ fn vcycle(levels: &[Level], work: &mut [Work], k: usize) -> f64 {
     wk.x.par_chunks_mut(l.w)
         .with_min_len(l.min_rows())
         .enumerate()
-        .for_each_init(Vec::new, |blend: &mut Vec<f64>, (y, row)| {
-            let [(c0, w0), (c1, w1)] = parents(y, c.h);
+        .for_each_init(Vec::new, |blend: &mut Vec<f32>, (y, row)| {
+            let [(c0, w0), (c1, w1)] = parents(y, c.h).map(|(k, w)| (k, w as f32));
             let (r0, r1) = (&ec[c0 * c.w..(c0 + 1) * c.w], &ec[c1 * c.w..(c1 + 1) * c.w]);
             blend.clear();
             blend.extend(r0.iter().zip(r1).map(|(a, b)| w0 * a + w1 * b));
             let u = &l.unknown[y * l.w..(y + 1) * l.w];
             for ((v, &known), &[(a, wa), (b, wb)]) in row.iter_mut().zip(u).zip(&px) {
                 if known {
-                    *v += wa * blend[a] + wb * blend[b];
+                    *v += wa as f32 * blend[a] + wb as f32 * blend[b];
                 }
             }
         });
@@ -482,19 +519,24 @@ pub fn solve_masked(div: &Grid<f64>, unknown: &Grid<bool>) -> (Grid<f64>, usize)
     }
     let mut work: Vec<Work> = levels.iter().map(Level::work).collect();
     let l0 = &levels[0];
-    // CG's residual is the finest level's right-hand side: the V-cycle
-    // reads it there without a copy
-    work[0]
-        .r
-        .par_iter_mut()
-        .zip(div.data.par_iter().zip(l0.unknown.par_iter()))
-        .for_each(|(r, (d, &u))| *r = if u { -d } else { 0.0 });
-    let bnorm = dot(&work[0].r, &work[0].r).sqrt();
+    let mut r: Vec<f64> = div
+        .data
+        .par_iter()
+        .zip(l0.unknown.par_iter())
+        .map(|(d, &u)| if u { -d } else { 0.0 })
+        .collect();
+    let bnorm = dot(&r, &r).sqrt();
     let mut x = vec![0.0; w * h];
     if bnorm == 0.0 {
         return (Grid::from_vec(w, h, x), 0);
     }
-    let mut z = vec![0.0; w * h];
+    // the V-cycle reads an f32 copy of CG's residual
+    work[0]
+        .r
+        .par_iter_mut()
+        .zip(r.par_iter())
+        .for_each(|(a, b)| *a = *b as f32);
+    let mut z = vec![0.0f32; w * h];
     // the search direction, and the buffer its next value is made in
     let (mut p, mut p_old) = (vec![0.0; w * h], vec![0.0; w * h]);
     let mut ap = vec![0.0; w * h];
@@ -513,11 +555,12 @@ pub fn solve_masked(div: &Grid<f64>, unknown: &Grid<bool>) -> (Grid<f64>, usize)
         let alpha = rz / pap;
         let rr: f64 = x
             .par_iter_mut()
-            .zip(work[0].r.par_iter_mut())
+            .zip(r.par_iter_mut().zip(work[0].r.par_iter_mut()))
             .zip(p.par_iter().zip(ap.par_iter()))
-            .map(|((xi, ri), (pi, ai))| {
+            .map(|((xi, (ri, r32)), (pi, ai))| {
                 *xi += alpha * pi;
                 *ri -= alpha * ai;
+                *r32 = *ri as f32;
                 *ri * *ri
             })
             .sum();
