@@ -163,6 +163,18 @@ fn an_error_stops_the_spindle() {
         assert!(e.0.contains("error:33"), "{e}");
         assert_eq!(p.sim.spindle_rpm(), 0.0, "error at line {at}");
     }
+    // an alarm stops it too (GRBL resets), and the message says where
+    // the job stands
+    let mut p = port(Faults {
+        alarm_at: Some((150, 1)),
+        ..Default::default()
+    });
+    let e = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap_err();
+    assert!(
+        e.0.contains("ALARM:1") && e.0.contains("the journal says"),
+        "{e}"
+    );
+    assert_eq!(p.sim.spindle_rpm(), 0.0, "alarm");
     std::fs::remove_dir_all(d).unwrap();
 }
 

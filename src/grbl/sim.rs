@@ -443,7 +443,8 @@ impl SimGrbl {
         self.say(&format!("error:{code}"));
     }
 
-    /// An alarm stops motion at once and locks G-code out until $X or $H.
+    /// An alarm stops motion and the spindle at once and locks G-code out
+    /// until $X or $H.
     fn raise(&mut self, code: u32) {
         self.planner.clear();
         self.last_dir = None;
@@ -451,6 +452,8 @@ impl SimGrbl {
         self.waiting = None;
         self.dwell = None;
         self.modal.pos = self.done;
+        // GRBL aborts into its reset on an alarm: spindle and coolant off
+        self.spindle = 0.0;
         self.alarm = Some(code);
         self.say(&format!("ALARM:{code}"));
     }
