@@ -14,6 +14,11 @@ echo "== bunny (69451 triangles), 1024 px"
 wall $R -v relief $M/stanford-bunny.obj --resolution 1024 -o "$T/b1k.png"
 echo "== bunny, 4096 px"
 wall $R -v relief $M/stanford-bunny.obj --resolution 4096 -o "$T/b4k.png"
+echo "== flat background (masked multigrid CG) against the free (DCT) solve: spot, 2048 and 4096 px"
+for res in 2048 4096; do
+  wall $R -v relief fixtures/spot.obj --resolution $res -o "$T/free$res.png"
+  wall $R -v relief fixtures/spot.obj --resolution $res --flat-background -o "$T/flat$res.png"
+done
 echo "== 2048 px depth PNG (the bunny's depth buffer), relievo vs numpy+scipy"
 $R -q relief $M/stanford-bunny.obj --resolution 2048 -o "$T/x.png" --depth-out "$T/depth2k.png"
 wall $R -v relief "$T/depth2k.png" -o "$T/r2k.png" --alpha 4 --silhouette 8 --depth 5
