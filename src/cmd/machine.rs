@@ -23,30 +23,41 @@ pub fn run(args: MachineArgs) -> relievo::Result<()> {
     use relievo::grbl::{port::SerialLink, sender::Replies};
     let mut port = SerialLink::open(&args.port, args.baud)?;
     let mut r = Replies::new(&mut port);
-    r.handshake(2.5)?;
     let lines = match args.action {
+        // read-only: no handshake, so no soft reset of a board that is
+        // running or holding; '?' again until a report comes (a board
+        // that resets on connection answers once it has booted)
         MachineAction::Status => {
-            r.port.write_all(b"?")?;
-            // a bounded wait, however chatty the device
             let mut got = Vec::new();
-            let until = r.port.now() + 2.0;
-            while r.port.now() < until {
-                let Some(l) = r.next(0.25)? else { continue };
-                let status = l.starts_with('<');
-                got.push(l);
-                if status {
-                    break;
+            let until = r.port.now() + 2.5;
+            let mut asked = f64::MIN;
+            while r.port.now() < until && !got.iter().any(|l: &String| l.starts_with('<')) {
+                if r.port.now() - asked >= 0.5 {
+                    r.port.write_all(b"?")?;
+                    asked = r.port.now();
+                }
+                if let Some(l) = r.next(0.1)? {
+                    got.push(l);
                 }
             }
             if !got.iter().any(|l| l.starts_with('<')) {
-                relievo::bail!("{}: no status report within 2 s of '?'", args.port);
+                relievo::bail!("{}: no status report within 2.5 s of '?'", args.port);
             }
             got
         }
-        MachineAction::Unlock => r.command("$X", 5.0)?,
-        MachineAction::Home => r.command("$H", 120.0)?,
+        action => {
+            r.handshake(2.5)?;
+            match action {
+                MachineAction::Unlock => r.command("$X", 5.0)?,
+                _ => r.command("$H", 120.0)?,
+            }
+        }
     };
-    for l in &lines {
+    // the answers, without the welcome and the oks
+    for l in lines
+        .iter()
+        .filter(|l| *l != "ok" && !l.starts_with("Grbl "))
+    {
         println!("{l}");
     }
     if let Some(e) = lines.iter().find(|l| l.starts_with("error:")) {

@@ -15,6 +15,9 @@ pub struct SendArgs {
     /// Run the whole job in GRBL's check mode first; stop if any line fails.
     #[arg(long)]
     pub check: bool,
+    /// Only validate the job in GRBL's check mode; run nothing.
+    #[arg(long, conflicts_with_all = ["check", "resume", "resume_from"])]
+    pub check_only: bool,
     /// Send one line and wait for its reply (slower; for troublesome links).
     #[arg(long)]
     pub send_response: bool,
@@ -50,6 +53,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
     let job = SendJob {
         job: args.job,
         check: args.check,
+        check_only: args.check_only,
         send_response: args.send_response,
         resume_from: args.resume_from,
         resume: args.resume,
@@ -78,7 +82,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         );
     }
     let (o, n) = job.run(&mut port, &CANCEL)?;
-    if !quiet {
+    if !quiet && !job.check_only {
         eprintln!(
             "{}: {n} lines sent and acknowledged in {:.1} s ({} bytes, {:.0} bytes/s)",
             job.job.display(),

@@ -16,6 +16,8 @@ pub struct SendJob {
     pub job: PathBuf,
     /// Validate the whole job in GRBL's check mode first.
     pub check: bool,
+    /// Only validate: check mode, then stop.
+    pub check_only: bool,
     /// Send one line and wait for its reply (instead of character counting).
     pub send_response: bool,
     /// Start at this job file line (with a safe re-entry).
@@ -80,7 +82,7 @@ impl SendJob {
                 opts.min_move = m;
             }
         }
-        if self.check {
+        if self.check || self.check_only {
             let errors = sender::check(&mut r, &lines, &opts)?;
             if !errors.is_empty() {
                 let list: Vec<String> = errors.iter().map(|e| e.describe()).collect();
@@ -90,6 +92,16 @@ impl SendJob {
                     errors.len(),
                     list.join("; ")
                 );
+            }
+            if self.progress || self.check_only {
+                eprintln!(
+                    "{}: check passed: {} lines",
+                    self.job.display(),
+                    lines.len()
+                );
+            }
+            if self.check_only {
+                return Ok((Outcome::default(), 0));
             }
         }
         if self.resume.is_none() && self.resume_from.is_none() {
