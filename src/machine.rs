@@ -17,6 +17,14 @@ impl Axes {
     pub fn get(&self, k: usize) -> f64 {
         [self.x, self.y, self.z][k]
     }
+
+    pub fn get_mut(&mut self, k: usize) -> &mut f64 {
+        match k {
+            0 => &mut self.x,
+            1 => &mut self.y,
+            _ => &mut self.z,
+        }
+    }
 }
 
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq)]

@@ -444,3 +444,44 @@ fn error_over_a_pseudo_terminal() {
     );
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Issue 10: the ETA comes from the job's time estimate with the
+/// controller's own rates (`$$`), which agrees with the simulated
+/// machine's run time on a feed-bound job.
+#[test]
+fn the_eta_clock_follows_the_machine_time() {
+    let d = scratch("send-clock");
+    let path = d.join("feed.nc");
+    let mut text = String::from("G21 G90 G94\nG1 X10 Y10 F600\n");
+    for k in 1..=400 {
+        let t = k as f64 * 0.05;
+        text.push_str(&format!(
+            "G1X{}Y{}\n",
+            relievo::gcode::emit::num(10.0 + 5.0 * t.cos()),
+            relievo::gcode::emit::num(10.0 + 5.0 * t.sin())
+        ));
+    }
+    std::fs::write(&path, &text).unwrap();
+    let mut p = port(Faults::default());
+    let settings = {
+        let mut r = sender::Replies::new(&mut p);
+        r.handshake(2.5).unwrap();
+        r.command("$$", 2.0).unwrap()
+    };
+    let lines = sender::load_job(&path).unwrap();
+    let clock = sender::clock(&lines, &text, &settings).unwrap();
+    assert_eq!(clock.len(), lines.len());
+    assert!(clock.windows(2).all(|w| w[0] <= w[1]));
+    let (o, _) = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap();
+    finish(&mut p);
+    let estimate = *clock.last().unwrap();
+    // the stream ends when the last line is acknowledged, up to a
+    // planner's worth of moves before the machine is done
+    let machine = o.seconds;
+    eprintln!("estimated {estimate:.2} s, streamed in {machine:.2} simulated s");
+    assert!(
+        (estimate - machine).abs() <= 0.1 * machine,
+        "estimate {estimate} s, machine {machine} s"
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}

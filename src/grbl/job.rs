@@ -76,10 +76,18 @@ impl SendJob {
         if let (true, Some((blocks, _))) = (st.state == "Idle", st.free) {
             opts.planner = blocks.max(1);
         }
-        // steps per mm tell which moves surely take a planner block
+        // steps per mm tell which moves surely take a planner block; the
+        // rates and accelerations time the job for the ETA
         if let Ok(settings) = r.command("$$", 2.0) {
             if let Some(m) = sender::min_move(&settings) {
                 opts.min_move = m;
+            }
+            if self.progress {
+                let text = crate::input::read_text(&self.job, crate::input::MAX_FILE)?;
+                opts.clock = sender::clock(&lines, &text, &settings).map(|c| {
+                    let base = if start > 0 { c[start - 1] } else { 0.0 };
+                    c[start..].iter().map(|t| t - base).collect()
+                });
             }
         }
         if self.check || self.check_only {

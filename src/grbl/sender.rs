@@ -117,6 +117,8 @@ pub struct Options {
     pub hold_limit: f64,
     /// GRBL's planner blocks (from a status report's `Bf:` when idle).
     pub planner: usize,
+    /// When each line should end by the time estimate (for the ETA).
+    pub clock: Option<Vec<f64>>,
     /// The shortest move sure to take a planner block: a step of the
     /// coarsest axis ($100-$102), since GRBL drops a move of no steps.
     pub min_move: f64,
@@ -135,6 +137,7 @@ impl Default for Options {
             hold_limit: 600.0,
             planner: super::sim::PLANNER_BLOCKS,
             min_move: MIN_MOVE,
+            clock: None,
         }
     }
 }
@@ -338,6 +341,45 @@ pub fn parse_status(l: &str) -> Option<Status> {
 /// belts, the coarsest common drive).
 pub const MIN_MOVE: f64 = 0.025;
 
+/// GRBL's `$$` setting `$N`, if listed.
+fn setting(settings: &[String], n: u32) -> Option<f64> {
+    let key = format!("${n}=");
+    settings
+        .iter()
+        .find_map(|l| l.strip_prefix(&key)?.trim().parse().ok())
+}
+
+/// When each job line should end, in seconds from the start, by the
+/// planner-based time estimate with the controller's own rates,
+/// accelerations and junction deviation (`$110-$112`, `$120-$122`, `$11`;
+/// a generic profile's where it does not list them). None when the job
+/// has lines relievo cannot read.
+pub fn clock(lines: &[JobLine], text: &str, settings: &[String]) -> Option<Vec<f64>> {
+    let prog = crate::gcode::program(text).ok()?;
+    let mut m = crate::machine::Machine::load("grbl-generic").ok()?;
+    for k in 0..3 {
+        for (axes, n) in [(&mut m.max_rate, 110), (&mut m.acceleration, 120)] {
+            if let Some(x) = setting(settings, n + k as u32).filter(|x| *x > 0.0) {
+                *axes.get_mut(k) = x;
+            }
+        }
+    }
+    if let Some(j) = setting(settings, 11).filter(|x| *x > 0.0) {
+        m.junction_deviation = j;
+    }
+    let times = crate::sim::line_times(&prog, &m);
+    let mut out = Vec::with_capacity(lines.len());
+    let (mut t, mut k) = (0.0, 0);
+    for l in lines {
+        while k < times.len() && times[k].0 <= l.number {
+            t += times[k].1;
+            k += 1;
+        }
+        out.push(t);
+    }
+    Some(out)
+}
+
 /// Steps per mm from GRBL's `$$` listing, as the shortest move sure to
 /// take a planner block.
 pub fn min_move(settings: &[String]) -> Option<f64> {
@@ -416,7 +458,7 @@ pub fn stream(
     let mut stop_time: Option<f64> = None;
     let mut last_reply = start;
     let mut tracker = Tracker::new(opts.planner, opts.min_move);
-    let mut progress = Progress::new(opts.progress, lines.len());
+    let mut progress = Progress::new(opts.progress, lines.len(), opts.clock.clone());
     let mut batch = Vec::new();
     loop {
         if cancel.load(Ordering::Relaxed) && !stopping {
@@ -617,51 +659,70 @@ pub fn check(r: &mut Replies, lines: &[JobLine], opts: &Options) -> Result<Vec<S
     Ok(o.errors)
 }
 
-/// Progress on stderr: a bar on a terminal, a log line every 5 s otherwise.
+/// Progress on stderr: a bar on a terminal, a log line every 5 s
+/// otherwise. The ETA comes from the job's time estimate (`clock`: when
+/// each line should end), scaled by how the machine keeps to it so far;
+/// without an estimate, from the lines.
 struct Progress {
     bar: Option<indicatif::ProgressBar>,
     log: bool,
     total: usize,
+    clock: Option<Vec<f64>>,
+    start: std::time::Instant,
     last_log: std::time::Instant,
+    pos: Option<[f64; 3]>,
 }
 
 impl Progress {
-    fn new(on: bool, total: usize) -> Progress {
+    fn new(on: bool, total: usize, clock: Option<Vec<f64>>) -> Progress {
         use std::io::IsTerminal;
         let tty = std::io::stderr().is_terminal();
         let bar = (on && tty).then(|| {
             let b = indicatif::ProgressBar::new(total as u64);
-            b.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{bar:30} {pos}/{len} lines {percent}% eta {eta} {msg}",
-                )
-                .unwrap(),
-            );
+            b.set_style(indicatif::ProgressStyle::with_template("{bar:20} {msg}").unwrap());
             b
         });
         Progress {
             bar,
             log: on && !tty,
             total,
+            clock: clock.filter(|c| c.len() == total && c.last().is_some_and(|t| *t > 0.0)),
+            start: std::time::Instant::now(),
             last_log: std::time::Instant::now(),
+            pos: None,
         }
     }
 
+    /// Seconds left, from `done` lines acknowledged so far.
+    fn eta(&self, done: usize) -> Option<f64> {
+        let elapsed = self.start.elapsed().as_secs_f64();
+        let (so_far, all) = match &self.clock {
+            Some(c) => (if done == 0 { 0.0 } else { c[done - 1] }, c[c.len() - 1]),
+            None => (done as f64, self.total as f64),
+        };
+        (so_far > 0.0 && elapsed > 1.0).then(|| (all - so_far).max(0.0) * elapsed / so_far)
+    }
+
     fn set(&mut self, done: usize, pos: Option<[f64; 3]>) {
-        let msg = pos.map(|p| format!("X{:.3} Y{:.3} Z{:.3}", p[0], p[1], p[2]));
+        if pos.is_some() {
+            self.pos = pos;
+        }
+        let eta = self.eta(done).map_or("--:--".into(), |s| {
+            let s = s.round() as u64;
+            format!("{}:{:02}", s / 60, s % 60)
+        });
+        let at = self.pos.map_or(String::new(), |p| {
+            format!(" X{:.3} Y{:.3} Z{:.3}", p[0], p[1], p[2])
+        });
+        let pct = 100.0 * done as f64 / self.total.max(1) as f64;
+        // fits 80 columns with the 20-column bar
+        let msg = format!("{done}/{} {pct:.0}% eta {eta}{at}", self.total);
         if let Some(b) = &self.bar {
             b.set_position(done as u64);
-            if let Some(m) = msg {
-                b.set_message(m);
-            }
+            b.set_message(msg);
         } else if self.log && self.last_log.elapsed().as_secs_f64() >= 5.0 {
             self.last_log = std::time::Instant::now();
-            eprintln!(
-                "{done}/{} lines ({:.0}%){}",
-                self.total,
-                100.0 * done as f64 / self.total.max(1) as f64,
-                msg.map_or(String::new(), |m| format!(" at {m}"))
-            );
+            eprintln!("{msg}");
         }
     }
 

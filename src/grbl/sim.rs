@@ -563,6 +563,8 @@ impl SimGrbl {
                 let t = self.travel;
                 let r = self.max_rate;
                 let s = self.steps;
+                let a = self.accel;
+                self.say(&format!("$11={:.3}", self.junction));
                 for (k, v) in [
                     (100, s.x),
                     (101, s.y),
@@ -570,6 +572,9 @@ impl SimGrbl {
                     (110, r.x),
                     (111, r.y),
                     (112, r.z),
+                    (120, a.x),
+                    (121, a.y),
+                    (122, a.z),
                     (130, t.x),
                     (131, t.y),
                     (132, t.z),

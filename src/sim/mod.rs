@@ -504,6 +504,26 @@ pub fn out_of_travel(prog: &Program, m: &Machine, origin: (f64, f64)) -> Vec<usi
 /// limits along each move, junction speeds from the junction deviation, a
 /// forward and backward pass, trapezoidal speed profiles; plus dwells.
 pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
+    timed(prog, m, |_, _| {})
+}
+
+/// Seconds of each job line's moves by that estimate: (1-based line,
+/// seconds), in job order (dwells not included).
+pub fn line_times(prog: &Program, m: &Machine) -> Vec<(usize, f64)> {
+    let mut out: Vec<(usize, f64)> = Vec::new();
+    timed(prog, m, |k, dt| {
+        let line = prog.segments[k].line;
+        match out.last_mut() {
+            Some(l) if l.0 == line => l.1 += dt,
+            _ => out.push((line, dt)),
+        }
+    });
+    out
+}
+
+/// The estimate, calling `each(segment, seconds)` for every move of some
+/// length.
+fn timed(prog: &Program, m: &Machine, mut each: impl FnMut(usize, f64)) -> f64 {
     // moves of some length, by index (4 bytes each: a 30 million move
     // job holds 4 arrays of f64 beside them, not a copy of its moves)
     let segs: Vec<u32> = (0..prog.segments.len() as u32)
@@ -573,7 +593,9 @@ pub fn estimate_time(prog: &Program, m: &Machine) -> f64 {
         let da = (vp * vp - ve * ve) / (2.0 * a);
         let dd = (vp * vp - vx * vx) / (2.0 * a);
         let cruise = (len[k] - da - dd).max(0.0);
-        t += (vp - ve) / a + (vp - vx) / a + if vp > 0.0 { cruise / vp } else { 0.0 };
+        let dt = (vp - ve) / a + (vp - vx) / a + if vp > 0.0 { cruise / vp } else { 0.0 };
+        each(segs[k] as usize, dt);
+        t += dt;
         v_in = vx;
     }
     t
