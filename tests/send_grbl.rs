@@ -485,3 +485,52 @@ fn the_eta_clock_follows_the_machine_time() {
     );
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Issue 10, acceptance 7: a job as another CAM program's GRBL post
+/// writes it (G54, a G40 G49 G80 preamble, T1, M8 ... M9) simulates and
+/// streams; every line reaches the machine and runs.
+#[test]
+fn a_foreign_post_simulates_and_streams() {
+    let d = scratch("send-foreign");
+    let path = d.join("foreign.nc");
+    let text = "%\n(made by another CAM program)\nG90 G94 G17\nG21\nG54\nG40 G49 G80\nT1\n\
+                M3 S12000\nM8\nG0 Z5\nG0 X10 Y10\nG1 Z-0.5 F300\nG1 X20 Y10 F800\n\
+                G2 X30 Y20 I0 J10\nG1 X30 Y30\nG0 Z5\nM9\nM5\nM30\n%\n";
+    std::fs::write(&path, text).unwrap();
+    let relief = d.join("r.png");
+    ok(&run(&[
+        "relief",
+        "--resolution",
+        "64",
+        "--width",
+        "40",
+        "-q",
+        "-o",
+        relief.to_str().unwrap(),
+    ]));
+    let sim = run(&[
+        "simulate",
+        path.to_str().unwrap(),
+        "--relief",
+        relief.to_str().unwrap(),
+        "--tool",
+        "ball:3",
+        "--stock",
+        "40x40x10",
+        "-o",
+        d.join("cut.png").to_str().unwrap(),
+        "-q",
+    ]);
+    ok(&sim);
+    let mut p = port(Faults::default());
+    job(&path).run(&mut p, &AtomicBool::new(false)).unwrap();
+    finish(&mut p);
+    let want: Vec<String> = text
+        .lines()
+        .map(relievo::gcode::parse::strip)
+        .filter(|l| !l.is_empty() && l != "%")
+        .collect();
+    assert_eq!(p.sim.log, want);
+    assert!(p.sim.errors.is_empty(), "{:?}", p.sim.errors);
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -21,7 +21,14 @@ pub struct Modal {
     pub spindle: Option<u8>,
     /// The last S word.
     pub speed: f64,
+    /// Mist (M7) and flood (M8) coolant.
+    pub coolant: (bool, bool),
+    /// The last T word (GRBL only tracks it).
+    pub tool: u32,
 }
+
+/// The motion mode after G80: axis words then have nothing to do.
+pub const NO_MOTION: u8 = 80;
 
 /// What one line does.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -65,6 +72,8 @@ impl Modal {
             feed: None,
             spindle: None,
             speed: 0.0,
+            coolant: (false, false),
+            tool: 0,
         }
     }
 
@@ -94,6 +103,8 @@ impl Modal {
         let mut dwell = false;
         for &(c, v) in &l.words {
             match (c, v as i32) {
+                // G91.1: arc centres are incremental, as they always are
+                ('G', 91) if v != 91.0 => {}
                 ('G', 0..=3) => new_motion = Some(v as u8),
                 ('G', 4) => dwell = true,
                 ('G', 20) => self.inches = true,
@@ -108,9 +119,31 @@ impl Modal {
                     self.spindle = None;
                     step.sync = true;
                 }
+                ('M', 7) => {
+                    self.coolant.0 = true;
+                    step.sync = true;
+                }
+                ('M', 8) => {
+                    self.coolant.1 = true;
+                    step.sync = true;
+                }
+                ('M', 9) => {
+                    self.coolant = (false, false);
+                    step.sync = true;
+                }
+                ('G', 80) => self.motion = NO_MOTION,
                 ('M', _) => step.sync = true,
                 _ => {}
             }
+        }
+        if let Some(t) = get('T') {
+            if t < 0.0 {
+                return refuse(4, format!("negative tool number T{t}"));
+            }
+            if t > 255.0 {
+                return refuse(38, format!("tool number T{t} exceeds 255"));
+            }
+            self.tool = t as u32;
         }
         if let Some(s) = get('S') {
             if s < 0.0 {
@@ -142,10 +175,13 @@ impl Modal {
         }
         let axes = ['X', 'Y', 'Z'].map(get);
         if axes.iter().all(Option::is_none) {
-            if new_motion.is_some_and(|m| m >= 2) {
+            if new_motion.is_some_and(|m| (2..=3).contains(&m)) {
                 return refuse(26, "arc without an end point".into());
             }
             return Ok(step);
+        }
+        if self.motion == NO_MOTION {
+            return refuse(31, "axis words with no motion mode (after G80)".into());
         }
         if self.motion >= 1 && self.feed.is_none() {
             return refuse(22, "feed move with no feed rate set (F)".into());
@@ -199,5 +235,17 @@ mod tests {
         assert_eq!(fold(&mut m, "G4").unwrap_err().code, 28);
         assert_eq!(fold(&mut m, "G2 I1").unwrap_err().code, 26);
         assert_eq!(fold(&mut m, "F-1").unwrap_err().code, 4);
+        // what other CAM programs' posts write
+        let mut m = Modal::new(DVec3::ZERO);
+        assert!(!fold(&mut m, "G90 G91.1 G0 X1").unwrap().relative);
+        assert!(fold(&mut m, "M8").unwrap().sync);
+        assert_eq!(m.coolant, (false, true));
+        assert_eq!(fold(&mut m, "T300").unwrap_err().code, 38);
+        assert!(fold(&mut m, "G40 G49 G80 T1").unwrap().to.is_none());
+        assert_eq!(fold(&mut m, "X5").unwrap_err().code, 31);
+        assert_eq!(
+            fold(&mut m, "G0 X5").unwrap().to,
+            Some(DVec3::new(5.0, 0.0, 0.0))
+        );
     }
 }

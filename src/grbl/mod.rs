@@ -30,9 +30,11 @@ pub fn error_meaning(n: u32) -> &'static str {
         26 => "no axis words found in block for G-code command that requires them",
         27 => "line number value is invalid",
         28 => "G-code command is missing a required value word",
+        31 => "axis words found in block when no command or current modal state uses them",
         33 => "motion command has an invalid target",
         34 => "arc radius definition is invalid",
         36 => "unused value words found in block",
+        38 => "tool number greater than max supported value",
         _ => "unknown error code",
     }
 }

@@ -48,7 +48,9 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
     let mut modal = Modal::new(DVec3::ZERO);
     for (k, l) in text.lines().enumerate() {
         let s = strip(l);
-        if s.is_empty() {
+        // '%' marks a program's start and end in a file; GRBL takes it
+        // for a bad word, so it is not sent
+        if s.is_empty() || s == "%" {
             continue;
         }
         // GRBL acts on these bytes wherever they come, even inside a line:
