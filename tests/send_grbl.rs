@@ -534,3 +534,44 @@ fn a_foreign_post_simulates_and_streams() {
     assert!(p.sim.errors.is_empty(), "{:?}", p.sim.errors);
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Issue 10: at an M0 (a tool change) the machine holds once the moves
+/// before it are done; `--on-pause continue` resumes it and the job
+/// completes with every line run once, in order; asking with no terminal
+/// stops with the line and the way on.
+#[test]
+fn an_m0_pause_holds_and_continues() {
+    let d = scratch("send-m0");
+    let (path, _) = write_spiral(&d, 400, 0.1);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut with_pause = String::new();
+    for (k, l) in text.lines().enumerate() {
+        with_pause.push_str(l);
+        with_pause.push('\n');
+        if k == 200 {
+            with_pause.push_str("M0 (fit the 1 mm ball, zero Z)\n");
+        }
+    }
+    std::fs::write(&path, &with_pause).unwrap();
+    let want: Vec<String> = with_pause
+        .lines()
+        .map(relievo::gcode::parse::strip)
+        .filter(|l| !l.is_empty())
+        .collect();
+    let mut p = port(Faults::default());
+    let go = SendJob {
+        on_pause: sender::OnPause::Continue,
+        ..job(&path)
+    };
+    go.run(&mut p, &AtomicBool::new(false)).unwrap();
+    finish(&mut p);
+    assert_eq!(p.sim.log, want);
+    // asked with no terminal (the test's stdin): a clear stop at the M0
+    let mut p = port(Faults::default());
+    let e = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap_err();
+    assert!(
+        e.0.contains("paused at job line 202") && e.0.contains("--on-pause continue"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}

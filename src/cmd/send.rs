@@ -39,6 +39,9 @@ pub struct SendArgs {
     /// before `send` stops the spindle and gives up.
     #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
     pub hold_limit: f64,
+    /// At an M0 (a tool change): ask on the terminal, or continue at once.
+    #[arg(long, value_enum, default_value = "ask")]
+    pub on_pause: relievo::grbl::sender::OnPause,
 }
 
 /// Ctrl-C: set by the signal handler, read by the sender.
@@ -62,6 +65,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         rx_buffer: 128,
         link_timeout: Some(args.link_timeout),
         hold_limit: Some(args.hold_limit),
+        on_pause: args.on_pause,
     };
     for (flag, v) in [
         ("--link-timeout", args.link_timeout),

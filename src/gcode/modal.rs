@@ -48,6 +48,8 @@ pub struct Step {
     pub sync: bool,
     /// Axis words in G91: running the line twice moves the machine twice.
     pub relative: bool,
+    /// M0: GRBL holds once the moves before it are done, until cycle start.
+    pub pause: bool,
 }
 
 /// A line GRBL refuses: its `error:N` code and what is wrong.
@@ -117,6 +119,10 @@ impl Modal {
                 }
                 ('M', 5) => {
                     self.spindle = None;
+                    step.sync = true;
+                }
+                ('M', 0) if v == 0.0 => {
+                    step.pause = true;
                     step.sync = true;
                 }
                 ('M', 7) => {

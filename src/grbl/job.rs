@@ -33,6 +33,8 @@ pub struct SendJob {
     pub link_timeout: Option<f64>,
     /// Seconds the machine may stay in Hold (default 600).
     pub hold_limit: Option<f64>,
+    /// What to do at an M0.
+    pub on_pause: sender::OnPause,
 }
 
 impl SendJob {
@@ -56,6 +58,7 @@ impl SendJob {
             progress: self.progress,
             link_timeout: self.link_timeout.unwrap_or(defaults.link_timeout),
             hold_limit: self.hold_limit.unwrap_or(defaults.hold_limit),
+            on_pause: self.on_pause,
             ..defaults
         };
         let mut r = Replies::new(port);

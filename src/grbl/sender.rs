@@ -38,6 +38,18 @@ pub struct JobLine {
     pub relative: bool,
     /// Seconds of dwell.
     pub dwell: f64,
+    /// M0: the machine holds here (a tool change) until cycle start.
+    pub pause: bool,
+}
+
+/// What to do when the job pauses at an M0.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnPause {
+    /// Show the line and wait for Enter on the terminal.
+    #[default]
+    Ask,
+    /// Continue at once (unattended runs, tests).
+    Continue,
 }
 
 /// The lines of a job that carry anything for GRBL.
@@ -88,6 +100,7 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
             travel,
             sync: step.as_ref().is_some_and(|st| st.sync),
             relative: step.as_ref().is_some_and(|st| st.relative),
+            pause: step.as_ref().is_some_and(|st| st.pause),
             dwell: step.and_then(|st| st.dwell).unwrap_or(0.0),
         });
     }
@@ -121,6 +134,7 @@ pub struct Options {
     pub planner: usize,
     /// When each line should end by the time estimate (for the ETA).
     pub clock: Option<Vec<f64>>,
+    pub on_pause: OnPause,
     /// The shortest move sure to take a planner block: a step of the
     /// coarsest axis ($100-$102), since GRBL drops a move of no steps.
     pub min_move: f64,
@@ -140,6 +154,7 @@ impl Default for Options {
             planner: super::sim::PLANNER_BLOCKS,
             min_move: MIN_MOVE,
             clock: None,
+            on_pause: OnPause::Ask,
         }
     }
 }
@@ -460,6 +475,8 @@ pub fn stream(
     let mut stop_time: Option<f64> = None;
     let mut last_reply = start;
     let mut tracker = Tracker::new(opts.planner, opts.min_move);
+    // an acknowledged M0 whose hold has not been seen yet
+    let mut pausing: Option<usize> = None;
     let mut progress = Progress::new(opts.progress, lines.len(), opts.clock.clone());
     let mut batch = Vec::new();
     loop {
@@ -544,6 +561,9 @@ pub fn stream(
                     out.stop = Some(e);
                 }
             } else if let Some(k) = items[item].job {
+                if lines[k].pause {
+                    pausing = Some(k);
+                }
                 out.acked += 1;
                 progress.set(k + 1, None);
                 if let Some(j) = journal.as_mut() {
@@ -568,7 +588,11 @@ pub fn stream(
                     j.executed(lines[e].number)?;
                 }
             }
-            if st.state.starts_with("Hold") || st.state.starts_with("Door") {
+            if let (Some(k), true) = (pausing, st.state.starts_with("Hold")) {
+                pausing = None;
+                progress.suspend(|| resume_pause(r, &lines[k], opts.on_pause))?;
+                hold_since = None;
+            } else if st.state.starts_with("Hold") || st.state.starts_with("Door") {
                 let since = *hold_since.get_or_insert(now);
                 if now - since > opts.hold_limit && !stopping {
                     r.port.write_all(&[super::SPINDLE_STOP])?;
@@ -631,6 +655,29 @@ pub fn stream(
     progress.finish();
     out.seconds = r.port.now() - start;
     Ok(out)
+}
+
+/// At an M0 the machine holds (the moves before it are done): say so, and
+/// continue with cycle start once the operator presses Enter, or at once.
+fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
+    use std::io::IsTerminal;
+    let what = format!("paused at job line {} '{}'", line.number, line.original);
+    if on == OnPause::Ask {
+        if !std::io::stdin().is_terminal() {
+            bail!(
+                "{what}, and there is no terminal to ask: the machine is holding; continue \
+                 with cycle start yourself, or send with --on-pause continue"
+            );
+        }
+        eprint!("{what}: do what it asks, then press Enter to continue ");
+        let mut answer = String::new();
+        std::io::stdin()
+            .read_line(&mut answer)
+            .map_err(|e| crate::Error(format!("reading the terminal: {e}")))?;
+    } else {
+        eprintln!("{what}: continuing (--on-pause continue)");
+    }
+    r.port.write_all(&[super::CYCLE_START])
 }
 
 /// After a feed hold: half a second for the hold to take (replies read
@@ -725,6 +772,14 @@ impl Progress {
         } else if self.log && self.last_log.elapsed().as_secs_f64() >= 5.0 {
             self.last_log = std::time::Instant::now();
             eprintln!("{msg}");
+        }
+    }
+
+    /// Run `f` with the bar off the screen (it prints and may ask).
+    fn suspend<T>(&self, f: impl FnOnce() -> T) -> T {
+        match &self.bar {
+            Some(b) => b.suspend(f),
+            None => f(),
         }
     }
 

@@ -75,6 +75,8 @@ pub struct SimGrbl {
     dwell: Option<(f64, String)>,
     /// A feed hold that cycle start does not release (fault).
     stuck: bool,
+    /// Held by an M0 until cycle start.
+    paused: bool,
     next_chatter: f64,
     /// Every G-code line executed, in order, as GRBL's line buffer held
     /// it: a move when it completes, a line without motion when GRBL has
@@ -120,6 +122,7 @@ impl SimGrbl {
             waiting: None,
             dwell: None,
             stuck: false,
+            paused: false,
             next_chatter: 0.0,
             log: Vec::new(),
             errors: Vec::new(),
@@ -152,7 +155,8 @@ impl SimGrbl {
 
     /// When the running block completes, if one runs.
     fn block_due(&self) -> Option<f64> {
-        (self.held_left.is_none() && !self.planner.is_empty()).then_some(self.block_end)
+        (self.held_left.is_none() && !self.paused && !self.planner.is_empty())
+            .then_some(self.block_end)
     }
 
     /// When something happens next: a block completes, a dwell ends, or
@@ -228,6 +232,11 @@ impl SimGrbl {
                 if let Some(left) = self.held_left.take() {
                     self.block_end = self.now + left;
                 }
+                if std::mem::take(&mut self.paused) {
+                    if let Some(b) = self.planner.front() {
+                        self.block_end = self.now + b.duration;
+                    }
+                }
             }
             SOFT_RESET => self.reset(),
             super::SPINDLE_STOP => {
@@ -255,6 +264,7 @@ impl SimGrbl {
         self.last_dir = None;
         self.held_left = None;
         self.stuck = false;
+        self.paused = false;
         self.waiting = None;
         self.dwell = None;
         self.check = false;
@@ -280,7 +290,7 @@ impl SimGrbl {
     fn status(&self) -> String {
         let state = if self.alarm.is_some() {
             "Alarm"
-        } else if self.held_left.is_some() || self.stuck {
+        } else if self.held_left.is_some() || self.stuck || self.paused {
             "Hold:0"
         } else if self.check {
             "Check"
@@ -408,6 +418,10 @@ impl SimGrbl {
                 Some(_) => self.modal.speed.max(1.0),
                 None => 0.0,
             };
+        }
+        if step.pause && !self.check {
+            // the moves before it are done (it synchronised): hold here
+            self.paused = true;
         }
         if let Some(p) = step.dwell.filter(|_| !self.check) {
             self.dwell = Some((self.now + p, line));
