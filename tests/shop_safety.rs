@@ -358,11 +358,15 @@ fn an_inch_job_cuts_what_the_mm_job_cuts() {
     let send = SendJob {
         job: inch.clone(),
         rx_buffer: 128,
+        // the job's tool change (M0): continue at once
+        on_pause: relievo::grbl::sender::OnPause::Continue,
         ..Default::default()
     };
     let (_, n) = send
         .run(&mut port, &std::sync::atomic::AtomicBool::new(false))
         .unwrap();
+    // acknowledged is queued: let the machine finish its planner
+    port.sim.advance(1e9);
     assert_eq!(port.sim.log.len(), n);
     assert!(port.sim.log.iter().any(|l| l.starts_with("G20")));
     std::fs::remove_dir_all(d).unwrap();
