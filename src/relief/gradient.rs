@@ -49,6 +49,11 @@ pub trait Source: Sync {
     fn slope(&self, x: usize, y: usize) -> (f32, f32);
     fn depth(&self, x: usize, y: usize) -> f32;
     fn id(&self, x: usize, y: usize) -> u16;
+    /// Whether the edges to (x + 1, y) and (x, y + 1) are outlines, given
+    /// the slopes `g` there. Without geometry: a slope above the threshold.
+    fn outlines(&self, _x: usize, _y: usize, g: (f32, f32), threshold: f32) -> (bool, bool) {
+        (g.0.abs() > threshold, g.1.abs() > threshold)
+    }
 }
 
 impl Source for DepthMap {
@@ -75,6 +80,20 @@ impl Source for DepthMap {
     }
     fn id(&self, x: usize, y: usize) -> u16 {
         *self.id.get(x, y)
+    }
+    /// A rendered mesh: an edge is an outline where the two samples do not
+    /// show one continuous surface (see `Surfaces::outline`), with the
+    /// threshold as the largest depth mismatch, in slope units, that still
+    /// counts as continuous; a steep surface is not an outline.
+    fn outlines(&self, x: usize, y: usize, g: (f32, f32), threshold: f32) -> (bool, bool) {
+        let Some(s) = &self.surfaces else {
+            return (g.0.abs() > threshold, g.1.abs() > threshold);
+        };
+        let tol = threshold as f64 / self.h.w.max(self.h.h) as f64;
+        (
+            x + 1 < self.h.w && s.outline((x, y), (x + 1, y), tol),
+            y + 1 < self.h.h && s.outline((x, y), (x, y + 1), tol),
+        )
     }
 }
 
@@ -113,9 +132,7 @@ pub fn compress(x: f64, alpha: f64) -> f64 {
 /// One source pixel shaped: (gx, gy, step x, step y, silhouette bits:
 /// 1 = x edge, 2 = y edge).
 #[inline]
-fn shape(g: (f32, f32), alpha: f32, threshold: f32) -> [f32; 5] {
-    let sil_x = g.0.abs() > threshold;
-    let sil_y = g.1.abs() > threshold;
+fn shape(g: (f32, f32), (sil_x, sil_y): (bool, bool), alpha: f32) -> [f32; 5] {
     let rx = if sil_x { 0.0 } else { g.0 };
     let ry = if sil_y { 0.0 } else { g.1 };
     let m = (rx * rx + ry * ry).sqrt();
@@ -137,11 +154,12 @@ fn shape(g: (f32, f32), alpha: f32, threshold: f32) -> [f32; 5] {
 
 /// A run of neighbouring silhouette edges of one sign across an outline
 /// (a surface turning away steeply just before its true edge) is one
-/// outline: only its steepest edge keeps the step.
+/// outline: only its steepest edge keeps the step. Each neighbour is
+/// (slope, is an outline).
 #[inline]
-fn dominated(v: f32, before: f32, after: f32, threshold: f32) -> bool {
-    let same = |u: f32| u.abs() > threshold && u.signum() == v.signum();
-    (same(before) && before.abs() > v.abs()) || (same(after) && after.abs() >= v.abs())
+fn dominated(v: f32, before: (f32, bool), after: (f32, bool)) -> bool {
+    let same = |u: (f32, bool)| u.1 && u.0.signum() == v.signum();
+    (same(before) && before.0.abs() > v.abs()) || (same(after) && after.0.abs() >= v.abs())
 }
 
 /// Output rows made per parallel task (source rows shared between
@@ -225,7 +243,7 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
     f.silhouette_edges = blocks
         .map_init(
             || (Vec::new(), Vec::new()),
-            |(raw, shaped): &mut (Vec<(f32, f32)>, Vec<[f32; 5]>), (b, out)| {
+            |(raw, shaped): &mut (Vec<((f32, f32), (bool, bool))>, Vec<[f32; 5]>), (b, out)| {
                 let ya = b * BLOCK;
                 let yb = ya + out.gx.len() / w;
                 // shaped source rows fa .. fb, kept in a per-thread buffer
@@ -237,26 +255,30 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                 let rb = (fb + 1).min(fh);
                 raw.clear();
                 for fy in ra..rb {
-                    raw.extend((0..fw).map(|x| src.slope(x, fy)));
+                    raw.extend((0..fw).map(|x| {
+                        let g = src.slope(x, fy);
+                        (g, src.outlines(x, fy, g, threshold))
+                    }));
                 }
                 let rawat = |fy: usize, fx: usize| raw[(fy - ra) * fw + fx];
                 let sa = fa.saturating_sub(1);
                 shaped.clear();
                 for fy in sa..fb {
                     for x in 0..fw {
-                        let g = rawat(fy, x);
-                        let mut p = shape(g, alpha, threshold);
+                        let (g, sil) = rawat(fy, x);
+                        let mut p = shape(g, sil, alpha);
+                        let none = ((0.0, 0.0), (false, false));
                         if p[2] != 0.0 {
-                            let before = if x > 0 { rawat(fy, x - 1).0 } else { 0.0 };
-                            let after = if x + 1 < fw { rawat(fy, x + 1).0 } else { 0.0 };
-                            if dominated(g.0, before, after, threshold) {
+                            let b = if x > 0 { rawat(fy, x - 1) } else { none };
+                            let a = if x + 1 < fw { rawat(fy, x + 1) } else { none };
+                            if dominated(g.0, (b.0 .0, b.1 .0), (a.0 .0, a.1 .0)) {
                                 p[2] = 0.0;
                             }
                         }
                         if p[3] != 0.0 {
-                            let before = if fy > 0 { rawat(fy - 1, x).1 } else { 0.0 };
-                            let after = if fy + 1 < rb { rawat(fy + 1, x).1 } else { 0.0 };
-                            if dominated(g.1, before, after, threshold) {
+                            let b = if fy > 0 { rawat(fy - 1, x) } else { none };
+                            let a = if fy + 1 < rb { rawat(fy + 1, x) } else { none };
+                            if dominated(g.1, (b.0 .1, b.1 .1), (a.0 .1, a.1 .1)) {
                                 p[3] = 0.0;
                             }
                         }
@@ -339,6 +361,7 @@ mod tests {
             h: d,
             id,
             objects: vec!["a".into()],
+            surfaces: None,
         }
     }
 

@@ -43,6 +43,7 @@ pub fn image_model(img: image::DynamicImage, name: String) -> ImageModel {
             h: hgrid,
             id,
             objects: vec![name],
+            surfaces: None,
         });
     }
     // Normal map: n = 2c - 1; slope = -n_xy / n_z in image-width units (the

@@ -45,10 +45,11 @@ pub fn render(
         );
     }
     let ids: Vec<u16> = mesh.tri_object.iter().map(|o| o + 1).collect();
-    let (h, id) = raster::rasterize(&pr.points, &mesh.triangles, &ids, pr.w, pr.h);
+    let (h, id, surfaces) = raster::rasterize(&pr.points, &mesh.triangles, &ids, pr.w, pr.h);
     Ok(DepthMap {
         h,
         id,
         objects: mesh.objects.clone(),
+        surfaces: Some(surfaces),
     })
 }

@@ -17,10 +17,22 @@ pub struct DepthMap {
     pub id: Grid<u16>,
     /// Object names; id k > 0 is `objects[k - 1]`.
     pub objects: Vec<String>,
+    /// Which triangle each sample shows, when the scene is a mesh: outlines
+    /// then come from the geometry instead of a slope threshold.
+    pub surfaces: Option<Surfaces>,
+}
+
+/// The surface behind every sample of a rendered mesh.
+#[derive(Clone, Debug)]
+pub struct Surfaces {
+    /// 1 + index into `tris` per sample; 0 = background.
+    pub tri: Grid<u32>,
+    tris: Vec<Setup>,
 }
 
 /// One triangle ready to scan: vertices in fixed point, counter-oriented so
 /// that the inside has positive edge values.
+#[derive(Clone, Debug)]
 struct Setup {
     v: [[i64; 2]; 3],
     h: [f64; 3],
@@ -32,6 +44,8 @@ struct Setup {
     y0: usize,
     y1: usize,
     id: u16,
+    /// The plane h = a x + b y + c in fixed-point pixel coordinates.
+    plane: [f64; 3],
 }
 
 fn setup(p: [[f64; 3]; 3], id: u16, w: usize, h: usize) -> Option<Setup> {
@@ -74,11 +88,20 @@ fn setup(p: [[f64; 3]; 3], id: u16, w: usize, h: usize) -> Option<Setup> {
     if x0 > x1 || y0 > y1 {
         return None;
     }
+    // h is affine in the edge values, which are affine in (x, y)
+    let edge = |k: usize, p: [f64; 2]| {
+        let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
+        (b[0] - a[0]) as f64 * (p[1] - a[1] as f64) - (b[1] - a[1]) as f64 * (p[0] - a[0] as f64)
+    };
+    let at = |p: [f64; 2]| (0..3).map(|k| edge(k, p) * hh[k]).sum::<f64>() / area as f64;
+    let c = at([0.0, 0.0]);
+    let plane = [at([1.0, 0.0]) - c, at([0.0, 1.0]) - c, c];
     Some(Setup {
         v,
         h: hh,
         area,
         bias,
+        plane,
         x0: x0 as usize,
         x1: x1 as usize,
         y0: y0 as usize,
@@ -139,17 +162,19 @@ pub fn rasterize(
     ids: &[u16],
     w: usize,
     h: usize,
-) -> (Grid<f32>, Grid<u16>) {
+) -> (Grid<f32>, Grid<u16>, Surfaces) {
     let (setups, bins) = prepare(points, tris, ids, w, h);
     let mut depth = Grid::new(w, h, 0.0f32);
     let mut idg = Grid::new(w, h, 0u16);
+    let mut tri = Grid::new(w, h, 0u32);
     depth
         .data
         .par_chunks_mut(w * STRIP)
         .zip(idg.data.par_chunks_mut(w * STRIP))
+        .zip(tri.data.par_chunks_mut(w * STRIP))
         .zip(bins.par_iter())
         .enumerate()
-        .for_each(|(s, ((dz, di), bin))| {
+        .for_each(|(s, (((dz, di), dt), bin))| {
             let ya = s * STRIP;
             let yb = (ya + STRIP).min(h);
             for &k in bin {
@@ -160,11 +185,79 @@ pub fn rasterize(
                     if di[i] == 0 || hv > dz[i] {
                         dz[i] = hv;
                         di[i] = t.id;
+                        dt[i] = k + 1;
                     }
                 });
             }
         });
-    (depth, idg)
+    let surfaces = Surfaces { tri, tris: setups };
+    (depth, idg, surfaces)
+}
+
+impl Setup {
+    /// Signed distance of a point (fixed point) from each edge line,
+    /// positive inside; edge k is opposite vertex k.
+    fn distances(&self, p: [f64; 2]) -> [f64; 3] {
+        [0, 1, 2].map(|k| {
+            let (a, b) = (self.v[(k + 1) % 3], self.v[(k + 2) % 3]);
+            let (dx, dy) = ((b[0] - a[0]) as f64, (b[1] - a[1]) as f64);
+            (dx * (p[1] - a[1] as f64) - dy * (p[0] - a[0] as f64)) / dx.hypot(dy)
+        })
+    }
+
+    /// The triangle's plane: depth at any point, inside or not.
+    #[inline]
+    fn depth_at(&self, p: [f64; 2]) -> f64 {
+        self.plane[0] * p[0] + self.plane[1] * p[1] + self.plane[2]
+    }
+}
+
+/// How far (pixels) a plane crossing may lie outside the two triangles and
+/// still count as their common edge: rounding only, since triangles that
+/// share an edge share its snapped vertices exactly.
+const EDGE_SLACK: f64 = 0.02;
+
+impl Surfaces {
+    /// Fixed-point centre of sample (x, y).
+    fn centre(x: usize, y: usize) -> [f64; 2] {
+        [
+            (x as i64 * SUB + SUB / 2) as f64,
+            (y as i64 * SUB + SUB / 2) as f64,
+        ]
+    }
+
+    /// Whether the edge between samples a and b (neighbours) is an outline:
+    /// one side is background, or the two sides are not one continuous
+    /// surface. Continuous means: the two samples' planes agree at both
+    /// samples within `tol` (a smooth surface finely tessellated, or one
+    /// plane), or they meet between the samples on an edge both triangles
+    /// reach (a crease, however steep either side is).
+    pub fn outline(&self, a: (usize, usize), b: (usize, usize), tol: f64) -> bool {
+        let (ta, tb) = (*self.tri.get(a.0, a.1), *self.tri.get(b.0, b.1));
+        if ta == 0 || tb == 0 {
+            return ta != tb;
+        }
+        if ta == tb {
+            return false;
+        }
+        let (sa, sb) = (&self.tris[ta as usize - 1], &self.tris[tb as usize - 1]);
+        let (pa, pb) = (Self::centre(a.0, a.1), Self::centre(b.0, b.1));
+        let d0 = sa.depth_at(pa) - sb.depth_at(pa);
+        let d1 = sa.depth_at(pb) - sb.depth_at(pb);
+        if d0.abs().max(d1.abs()) <= tol {
+            return false;
+        }
+        if d0 * d1 < 0.0 {
+            let s = d0 / (d0 - d1);
+            let p = [pa[0] + s * (pb[0] - pa[0]), pa[1] + s * (pb[1] - pa[1])];
+            let slack = -EDGE_SLACK * SUB as f64;
+            let inside = |t: &Setup| t.distances(p).iter().all(|&d| d >= slack);
+            if inside(sa) && inside(sb) {
+                return false;
+            }
+        }
+        true
+    }
 }
 
 /// How many triangles cover each pixel centre (for the fill-rule tests).
@@ -245,7 +338,7 @@ mod tests {
             [10.0, 0.0, 0.1],
             [0.0, 10.0, 0.1],
         ];
-        let (d, id) = rasterize(&pts, &[[0, 1, 2], [3, 4, 5]], &[1, 2], 10, 10);
+        let (d, id, _) = rasterize(&pts, &[[0, 1, 2], [3, 4, 5]], &[1, 2], 10, 10);
         assert_eq!(*id.get(0, 0), 2);
         assert_eq!(*id.get(7, 1), 1);
         assert!((*d.get(7, 1) - 0.2).abs() < 1e-6);

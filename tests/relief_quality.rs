@@ -1,0 +1,133 @@
+//! Relief quality beyond the paper (issue 11), on the shipped models:
+//! outlines from the geometry, so steep surfaces stay surfaces.
+
+mod common;
+
+use common::shared_model;
+use relievo::grid::Grid;
+use relievo::relief::gradient::{shape_field, Field, Shaping};
+use relievo::relief::{build, Method, Params};
+use relievo::scene::{mesh, render, Camera, View};
+use relievo::timing::Timings;
+use std::path::Path;
+
+fn params(steps: Option<f64>) -> Params {
+    Params {
+        depth_mm: 5.0,
+        width_mm: 100.0,
+        alpha: 4.0,
+        silhouette: 8.0,
+        steps_mm: steps,
+        flat_background: false,
+        bands: vec![],
+        mirror: false,
+        invert: false,
+        method: Method::Gradient,
+    }
+}
+
+/// A relief of a shipped model and its field (ids, outline barriers).
+fn relief(model: &str, cam: Camera, res: usize, p: &Params) -> (Grid<f32>, Field, Vec<String>) {
+    let m = mesh::load(Path::new(&shared_model(model))).unwrap();
+    let dm = render(&m, &cam, res, 2, (1 << 26, "allowed")).unwrap();
+    let field = shape_field(
+        &dm,
+        2,
+        Shaping {
+            alpha: p.alpha,
+            threshold: p.silhouette,
+        },
+    );
+    let r = build(&field, p, &[], &mut Timings::default()).unwrap();
+    (r.heights, field, m.objects)
+}
+
+/// Mean height slope (mm per sample, x and y) over an object's samples
+/// that are at least 2 samples from any outline, and how many there are.
+fn object_slope(h: &Grid<f32>, f: &Field, id: u16) -> (f64, f64, usize) {
+    let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+    for y in 2..h.h - 2 {
+        for x in 2..h.w - 2 {
+            let near_outline =
+                (y - 2..=y + 2).any(|yy| (x - 2..=x + 2).any(|xx| *f.barrier.get(xx, yy)));
+            let same = (y - 2..=y + 2).all(|yy| (x - 2..=x + 2).all(|xx| *f.id.get(xx, yy) == id));
+            if near_outline || !same {
+                continue;
+            }
+            sx += (*h.get(x + 1, y) - *h.get(x - 1, y)) as f64 / 2.0;
+            sy += (*h.get(x, y + 1) - *h.get(x, y - 1)) as f64 / 2.0;
+            n += 1;
+        }
+    }
+    (sx / n.max(1) as f64, sy / n.max(1) as f64, n)
+}
+
+/// The Cornell box seen through its open side (its own front, from -z:
+/// `--view back` with +y up): the receding floor, ceiling and side walls
+/// are surfaces, not outlines, so each slopes toward the back wall; with
+/// steps, a straight line across a wall crosses at most one step.
+#[test]
+fn cornell_walls_recede_and_carry_no_terraces() {
+    let cam = Camera {
+        view: View::Back,
+        ..Camera::default()
+    };
+    for steps in [None, Some(0.3)] {
+        let p = params(steps);
+        let (h, f, objects) = relief("cornell_box.obj", cam, 256, &p);
+        let id = |name: &str| objects.iter().position(|o| o == name).unwrap() as u16 + 1;
+        // image x runs right, y down; the eye looks into the box
+        let expect = [
+            ("floor", (0.0, 1.0)),      // rises toward the viewer: down the image
+            ("ceiling", (0.0, -1.0)),   // rises up the image
+            ("green_wall", (1.0, 0.0)), // seen on the right from -z
+            ("red_wall", (-1.0, 0.0)),
+        ];
+        for (name, (ex, ey)) in expect {
+            let (sx, sy, n) = object_slope(&h, &f, id(name));
+            eprintln!("{steps:?} {name}: {n} samples, slope ({sx:.4}, {sy:.4}) mm/sample");
+            assert!(n > 200, "{name}: only {n} samples away from outlines");
+            let along = sx * ex + sy * ey;
+            assert!(
+                along > 0.005,
+                "{name} ({steps:?}): slope ({sx:.4}, {sy:.4}) mm/sample does not rise toward the viewer"
+            );
+        }
+        for name in ["back_wall", "short_block", "tall_block"] {
+            let (_, _, n) = object_slope(&h, &f, id(name));
+            assert!(n > 200, "{name}: only {n} samples away from outlines");
+        }
+        // the blocks stand out of the back wall and floor behind them
+        let mean = |name: &str| {
+            let k = id(name);
+            let v: Vec<f64> = (0..h.data.len())
+                .filter(|&i| f.id.data[i] == k)
+                .map(|i| h.data[i] as f64)
+                .collect();
+            v.iter().sum::<f64>() / v.len() as f64
+        };
+        assert!(mean("short_block") > mean("back_wall") && mean("tall_block") > mean("back_wall"));
+        if let Some(s) = steps {
+            // rows across the side walls
+            let mut worst = 0;
+            for y in (h.h / 4..3 * h.h / 4).step_by(4) {
+                for wall in ["green_wall", "red_wall"] {
+                    let k = id(wall);
+                    let xs: Vec<usize> = (0..h.w).filter(|&x| *f.id.get(x, y) == k).collect();
+                    let (a, b) = (xs[0], *xs.last().unwrap());
+                    // a terrace is a jump of half a step beyond the wall's own slope
+                    let d: Vec<f64> = (a..b)
+                        .map(|x| (*h.get(x + 1, y) - *h.get(x, y)) as f64)
+                        .collect();
+                    let mut sorted = d.clone();
+                    sorted.sort_by(f64::total_cmp);
+                    let slope = sorted[sorted.len() / 2];
+                    let jumps = d.iter().filter(|v| (*v - slope).abs() > s / 2.0).count();
+                    worst = worst.max(jumps);
+                }
+            }
+            eprintln!("most steps along a row across a side wall: {worst}");
+            assert!(worst <= 1, "a side wall has {worst} terraces along one row");
+        }
+    }
+}
