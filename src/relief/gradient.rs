@@ -162,6 +162,9 @@ fn dominated(v: f32, before: (f32, bool), after: (f32, bool)) -> bool {
     (same(before) && before.0.abs() > v.abs()) || (same(after) && after.0.abs() >= v.abs())
 }
 
+/// A source sample's raw slopes and whether its two edges are outlines.
+type RawEdge = ((f32, f32), (bool, bool));
+
 /// Output rows made per parallel task (source rows shared between
 /// neighbouring output rows are shaped once per block).
 const BLOCK: usize = 16;
@@ -243,7 +246,7 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
     f.silhouette_edges = blocks
         .map_init(
             || (Vec::new(), Vec::new()),
-            |(raw, shaped): &mut (Vec<((f32, f32), (bool, bool))>, Vec<[f32; 5]>), (b, out)| {
+            |(raw, shaped): &mut (Vec<RawEdge>, Vec<[f32; 5]>), (b, out)| {
                 let ya = b * BLOCK;
                 let yb = ya + out.gx.len() / w;
                 // shaped source rows fa .. fb, kept in a per-thread buffer
