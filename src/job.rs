@@ -6,9 +6,10 @@ use crate::error::Result;
 use crate::grid::Grid;
 use crate::output::{check_writable, Outputs};
 use crate::relief::gradient::{shape_field, Field, Shaping};
+use crate::relief::panel::{Fade, Tilt};
 use crate::relief::{self, file, Method, Params, Relief, Stencil};
 use crate::scene::image_input::{load_png, ImageModel};
-use crate::scene::{self, Camera};
+use crate::scene::{self, Camera, Up};
 use crate::timing::Timings;
 use crate::{export, materials, preview};
 use std::path::PathBuf;
@@ -36,7 +37,11 @@ pub const MAX_RESOLUTION: usize = 16384;
 pub struct ReliefJob {
     /// OBJ, STL, depth PNG or normal PNG; `None` = the built-in demo scene.
     pub model: Option<PathBuf>,
+    /// The camera; its `up` is replaced by the model's default when `up`
+    /// is `None`.
     pub camera: Camera,
+    /// The model's up axis; `None` = z for STL, y otherwise.
+    pub up: Option<Up>,
     pub resolution: usize,
     /// Panel width in mm.
     pub width_mm: f64,
@@ -55,6 +60,10 @@ pub struct ReliefJob {
     pub mirror: bool,
     pub invert: bool,
     pub method: Method,
+    /// `--fade DIR[:AMOUNT]`, parsed with the other parameters.
+    pub fade: Option<String>,
+    /// `--tilt DEG[:DIR]`.
+    pub tilt: Option<String>,
     pub output: PathBuf,
     pub stl: Option<PathBuf>,
     pub base_mm: f64,
@@ -67,6 +76,7 @@ impl Default for ReliefJob {
         ReliefJob {
             model: None,
             camera: Camera::default(),
+            up: None,
             resolution: 512,
             width_mm: 100.0,
             depth_mm: None,
@@ -82,6 +92,8 @@ impl Default for ReliefJob {
             mirror: false,
             invert: false,
             method: Method::Gradient,
+            fade: None,
+            tilt: None,
             output: PathBuf::from("relief.png"),
             stl: None,
             base_mm: 2.0,
@@ -103,6 +115,8 @@ pub struct Summary {
     pub timings: Timings,
     pub silhouette_edges: usize,
     pub written: Vec<PathBuf>,
+    /// Things the user should know about the result (a flat relief).
+    pub warnings: Vec<String>,
 }
 
 impl ReliefJob {
@@ -132,6 +146,8 @@ impl ReliefJob {
             mirror: self.mirror,
             invert: self.invert,
             method: self.method,
+            fade: self.fade.as_deref().map(Fade::parse).transpose()?,
+            tilt: self.tilt.as_deref().map(Tilt::parse).transpose()?,
         };
         p.validate()?;
         Ok(p)
@@ -219,13 +235,35 @@ impl ReliefJob {
             None => t.time("load", scene::demo::scene),
         };
         let dm = t.time("rasterize", || {
-            scene::render(&mesh, &self.camera, self.resolution, 2, pixel_limit(p))
+            scene::render(&mesh, &self.camera(), self.resolution, 2, pixel_limit(p))
         })?;
         if dm.id.data.iter().all(|&i| i == 0) {
             bail!("{}: nothing visible from this view", self.model_name());
         }
         let field = t.time("gradients", || shape_field(&dm, 2, shaping));
         Ok((field, mesh.objects))
+    }
+
+    /// The model's up axis and whether it was chosen by its file type.
+    pub fn up(&self) -> (Up, bool) {
+        let stl = self
+            .model
+            .as_ref()
+            .and_then(|m| m.extension())
+            .is_some_and(|e| e.eq_ignore_ascii_case("stl"));
+        match self.up {
+            Some(u) => (u, false),
+            None if stl => (Up::Z, true),
+            None => (Up::Y, true),
+        }
+    }
+
+    /// The camera with the up axis resolved.
+    pub fn camera(&self) -> Camera {
+        Camera {
+            up: self.up().0,
+            ..self.camera
+        }
     }
 
     pub fn model_name(&self) -> String {
@@ -297,13 +335,14 @@ impl ReliefJob {
                 file::png16(&d)
             })
         });
+        let warnings: Vec<String> = relief::flatness(&relief, &field).into_iter().collect();
         // the field is 30 bytes a pixel: gone before the outputs are made
         let silhouette_edges = field.silhouette_edges;
         drop((field, stencils));
         let mut out = Outputs::default();
         let meta = serde_json::json!({
             "model": self.model_name(),
-            "camera": self.camera,
+            "camera": self.camera(),
             "resolution": self.resolution,
             "material": self.material,
             "relief": params,
@@ -340,6 +379,7 @@ impl ReliefJob {
             timings: t,
             silhouette_edges,
             written,
+            warnings,
         })
     }
 }

@@ -35,6 +35,8 @@ fn relief(steps: Option<f64>, res: usize) -> (Grid<f32>, Grid<bool>) {
         mirror: false,
         invert: false,
         method: Method::Gradient,
+        fade: None,
+        tilt: None,
     };
     let r = build(&field, &p, &[], &mut Timings::default()).unwrap();
     (r.heights, field.barrier)

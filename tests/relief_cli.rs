@@ -101,6 +101,8 @@ fn outputs_and_options() {
     ok(&run(&[
         "relief",
         &fixture("suzanne.stl"),
+        "--up",
+        "y",
         "-o",
         &p("s.png"),
         "--resolution",

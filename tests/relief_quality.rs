@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::shared_model;
+use common::{ok, read_png16, run, scratch, shared_model};
 use relievo::grid::Grid;
 use relievo::relief::gradient::{shape_field, Field, Shaping};
 use relievo::relief::{build, Method, Params};
@@ -23,6 +23,8 @@ fn params(steps: Option<f64>) -> Params {
         mirror: false,
         invert: false,
         method: Method::Gradient,
+        fade: None,
+        tilt: None,
     }
 }
 
@@ -130,4 +132,114 @@ fn cornell_walls_recede_and_carry_no_terraces() {
             assert!(worst <= 1, "a side wall has {worst} terraces along one row");
         }
     }
+}
+
+/// Nefertiti is modelled z-up, facing -y. `--up z` shows her face upright
+/// from the front, the very view today's flags reached from below (eye at
+/// -y, picture up +z); an STL is read z-up unless told otherwise.
+#[test]
+fn a_z_up_model_stands_upright() {
+    let d = scratch("upright");
+    let obj = shared_model("nefertiti.obj");
+    let p = |n: &str| d.join(n).display().to_string();
+    let relief = |args: &[&str], out: &str| {
+        let mut a = vec!["relief", "--resolution", "96", "-o"];
+        let o = p(out);
+        a.push(&o);
+        a.extend_from_slice(args);
+        let r = run(&a);
+        ok(&r);
+        (
+            read_png16(&d.join(out)),
+            String::from_utf8_lossy(&r.stderr).to_string(),
+        )
+    };
+    let (front, _) = relief(&[&obj, "--up", "z"], "front.png");
+    let (bottom, _) = relief(&[&obj, "--view", "bottom"], "bottom.png");
+    assert_eq!(front, bottom, "--up z front differs from --view bottom");
+    // taller than wide: standing, not lying
+    assert!(front.1 > 2 * front.0, "{} x {} px", front.0, front.1);
+    // the same mesh as a binary STL stands up without being told
+    let m = mesh::load(Path::new(&obj)).unwrap();
+    let tris: Vec<stl_io::Triangle> = m
+        .triangles
+        .iter()
+        .map(|t| {
+            let v = t.map(|i| {
+                let q = m.positions[i as usize];
+                stl_io::Vertex::new([q.x, q.y, q.z])
+            });
+            stl_io::Triangle {
+                normal: stl_io::Normal::new([0.0, 0.0, 0.0]),
+                vertices: v,
+            }
+        })
+        .collect();
+    let stl = d.join("nefertiti.stl");
+    let mut f = std::fs::File::create(&stl).unwrap();
+    stl_io::write_stl(&mut f, tris.iter()).unwrap();
+    drop(f);
+    let (from_stl, said) = relief(&[&stl.display().to_string()], "stl.png");
+    assert!(said.contains("up axis: z (STL default"), "{said}");
+    assert_eq!(from_stl, front, "the STL is not read z-up by default");
+    // and a quarter roll turns the picture on its side
+    let (rolled, _) = relief(&[&obj, "--up", "z", "--roll", "90"], "roll.png");
+    assert!(rolled.0 > 2 * rolled.1, "{} x {} px", rolled.0, rolled.1);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// `--fade` lowers heights toward its side and leaves the far side;
+/// `--tilt` adds a plane of the requested angle, its rise taken out of the
+/// depth; a flat relief is said to be flat, with a reason.
+#[test]
+fn fade_tilt_and_a_flat_warning() {
+    let d = scratch("fade-tilt");
+    let relief = |extra: &[&str], out: &str| {
+        let o = d.join(out);
+        let mut a = vec!["relief", "--resolution", "120", "-o"];
+        let os = o.display().to_string();
+        a.push(&os);
+        a.extend_from_slice(extra);
+        let r = run(&a);
+        ok(&r);
+        let (w, h, v, depth) = common::relief_mm(&o);
+        (
+            w,
+            h,
+            v,
+            depth,
+            String::from_utf8_lossy(&r.stderr).to_string(),
+        )
+    };
+    let (w, h, plain, _, _) = relief(&[], "plain.png");
+    let (_, _, faded, _, _) = relief(&["--fade", "left:1"], "fade.png");
+    // one 16-bit step of a 5 mm relief, and a rounding either side
+    let q = 2.0 * 5.0 / 65535.0;
+    let worst = |got: &[f64], want: &dyn Fn(usize, usize) -> f64| {
+        (0..w * h)
+            .map(|i| (got[i] - want(i % w, i / w)).abs())
+            .fold(0.0, f64::max)
+    };
+    // heights x (x + 0.5) / w: nothing at the left edge, all at the right
+    let e = worst(&faded, &|x, y| {
+        plain[y * w + x] * (x as f64 + 0.5) / w as f64
+    });
+    eprintln!("fade: off the linear fade by at most {e:.6} mm");
+    assert!(e <= q, "fade off by {e} mm");
+    let (_, _, tilted, depth, _) = relief(&["--tilt", "1.5:top"], "tilt.png");
+    assert_eq!(depth, 5.0);
+    // the subject scaled into what the plane leaves, the plane added
+    let height_mm = 100.0 * h as f64 / w as f64;
+    let rise = 1.5f64.to_radians().tan() * height_mm;
+    let k = (5.0 - rise) / 5.0;
+    let e = worst(&tilted, &|x, y| {
+        plain[y * w + x] * k + rise * (h as f64 - y as f64 - 0.5) / h as f64
+    });
+    eprintln!("tilt: rise {rise:.3} mm over {height_mm:.1} mm, off by at most {e:.6} mm");
+    assert!(e <= 2.0 * q, "tilt off by {e} mm");
+    // the Cornell box from +z shows only the back of its back wall
+    let cornell = shared_model("cornell_box.obj");
+    let (_, _, _, _, said) = relief(&[&cornell], "flat.png");
+    assert!(said.contains("warning: the relief is flat"), "{said}");
+    std::fs::remove_dir_all(d).unwrap();
 }

@@ -34,7 +34,11 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
         material,
     );
     relievo::output::check_writable(&args.output)?;
+    super::relief::say_up(&rjob, quiet);
     let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
+    for w in &r.warnings {
+        eprintln!("warning: {w}");
+    }
     // all or nothing, also when interrupted: no relief without its job
     for p in &r.written {
         relievo::output::interrupt::remove_on_interrupt(p);

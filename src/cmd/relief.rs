@@ -5,7 +5,7 @@ use super::{print_timings, spinner};
 use clap::Args;
 use relievo::job::ReliefJob;
 use relievo::relief::Method;
-use relievo::scene::{Camera, View};
+use relievo::scene::{Camera, Up, View};
 use std::path::PathBuf;
 
 #[derive(Args)]
@@ -24,9 +24,16 @@ pub struct ReliefArgs {
 
 #[derive(Args)]
 pub struct ReliefOpts {
-    /// View preset (where the eye is, seen from the model).
+    /// View preset (where the eye is, seen from the model's own front, top and sides).
     #[arg(long, value_enum, default_value_t = View::Front)]
     pub view: View,
+    /// The model's up axis: y, z, -y, -z, x or -x [default: z for STL, y for OBJ].
+    /// Front is +z for y-up models and -y for z-up models.
+    #[arg(long, value_enum, allow_hyphen_values = true)]
+    pub up: Option<Up>,
+    /// Turn the picture counter-clockwise by this many degrees.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub roll: f64,
     /// Extra turn about the vertical axis, degrees.
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub yaw: f64,
@@ -78,6 +85,15 @@ pub struct ReliefOpts {
     /// Hollow relief (for moulds).
     #[arg(long)]
     pub invert: bool,
+    /// Fade the heights linearly toward a side: DIR[:AMOUNT], DIR = right, top,
+    /// left, bottom or degrees counter-clockwise from the right; AMOUNT 0..1
+    /// (1 = to nothing at that side).
+    #[arg(long)]
+    pub fade: Option<String>,
+    /// Tilt the panel: DEG[:DIR], a plane rising at DEG degrees toward DIR
+    /// (default top); its rise comes out of the depth.
+    #[arg(long)]
+    pub tilt: Option<String>,
     /// gradient (Weyrich 2007) or linear (Cignoni 1997 baseline).
     #[arg(long, value_enum, default_value_t = Method::Gradient)]
     pub method: Method,
@@ -90,6 +106,20 @@ pub struct ReliefOpts {
     /// Also write the depth buffer (at relief resolution) as a 16-bit PNG.
     #[arg(long)]
     pub depth_out: Option<PathBuf>,
+}
+
+/// Print the up axis a mesh is read with when its file type chose it, so
+/// that a model lying on its back is explained.
+pub fn say_up(job: &ReliefJob, quiet: bool) {
+    let mesh = job
+        .model
+        .as_ref()
+        .and_then(|m| m.extension())
+        .is_some_and(|e| !e.eq_ignore_ascii_case("png"));
+    if let (false, (up, true), true) = (quiet, job.up(), mesh) {
+        let kind = if up == Up::Z { "STL" } else { "OBJ" };
+        eprintln!("up axis: {} ({kind} default; --up to change)", up.name());
+    }
 }
 
 pub fn parse_emphasis(s: &str) -> Result<(String, f64), String> {
@@ -111,7 +141,10 @@ impl ReliefOpts {
                 yaw: self.yaw,
                 pitch: self.pitch,
                 fov: self.fov,
+                up: Up::Y,
+                roll: self.roll,
             },
+            up: self.up,
             resolution: self.resolution,
             width_mm: self.width,
             depth_mm: self.depth,
@@ -127,6 +160,8 @@ impl ReliefOpts {
             mirror: self.mirror,
             invert: self.invert,
             method: self.method,
+            fade: self.fade,
+            tilt: self.tilt,
             output,
             stl: self.stl,
             base_mm: self.base,
@@ -140,6 +175,7 @@ impl ReliefOpts {
 pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     let mut job = args.opts.job(args.model, args.output);
     job.preview = args.preview;
+    say_up(&job, quiet);
     let pb = spinner(quiet);
     let mut stage = |s: &str| {
         if let Some(pb) = &pb {
@@ -151,6 +187,9 @@ pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> 
         pb.finish_and_clear();
     }
     let s = res?;
+    for w in &s.warnings {
+        eprintln!("warning: {w}");
+    }
     if !quiet {
         let r = &s.relief;
         eprintln!(

@@ -5,6 +5,7 @@
 pub mod bands;
 pub mod file;
 pub mod gradient;
+pub mod panel;
 pub mod poisson;
 
 use crate::bail;
@@ -37,6 +38,8 @@ pub struct Params {
     pub mirror: bool,
     pub invert: bool,
     pub method: Method,
+    pub fade: Option<panel::Fade>,
+    pub tilt: Option<panel::Tilt>,
 }
 
 /// Selective scaling: slopes inside `weight` (0..1 per pixel) times `gain`.
@@ -125,14 +128,77 @@ impl Params {
     }
 }
 
+/// Why a relief came out flat or nearly flat, if it did: all of it at one
+/// height, or 98% of the subject within half the depth (the rest spent on
+/// a few spikes). The reason names what to change.
+pub fn flatness(r: &Relief, field: &Field) -> Option<String> {
+    let mut fg: Vec<f32> = r
+        .heights
+        .data
+        .iter()
+        .zip(&field.mask.data)
+        .filter(|(_, &m)| m)
+        .map(|(h, _)| *h)
+        .collect();
+    if fg.is_empty() {
+        return None;
+    }
+    let on_outline = field
+        .barrier
+        .data
+        .iter()
+        .zip(&field.mask.data)
+        .filter(|(b, m)| **b && **m)
+        .count() as f64
+        / fg.len() as f64;
+    let why = if on_outline > 0.5 {
+        format!(
+            "{:.0}% of the subject's samples touch an outline, so their slopes were zeroed; raise --silhouette",
+            100.0 * on_outline
+        )
+    } else {
+        "the model shows little depth from this view, or a few outline ends or holes took the depth; try another view, --steps or a larger --alpha".to_string()
+    };
+    let (lo, hi) = fg
+        .iter()
+        .fold((f32::MAX, f32::MIN), |(l, h), v| (l.min(*v), h.max(*v)));
+    if hi - lo <= 1e-6 * r.depth_mm as f32 {
+        return Some(format!("the relief is flat: {why}"));
+    }
+    let k = fg.len() / 100;
+    fg.sort_unstable_by(f32::total_cmp);
+    let spread = (fg[fg.len() - 1 - k] - fg[k]) as f64;
+    // shipped models keep 80-95% of the depth in 98% of the subject
+    (spread < 0.5 * r.depth_mm).then(|| {
+        format!(
+            "the relief is nearly flat: 98% of the subject lies within {spread:.2} mm of the {} mm depth; {why}",
+            r.depth_mm
+        )
+    })
+}
+
 /// Turn a shaped field into a relief.
 pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -> Result<Relief> {
     p.validate()?;
     let (w, h) = (field.gx.w, field.gx.h);
     let n = w.max(h);
+    let height_mm = p.width_mm * h as f64 / w as f64;
+    // a tilt's plane takes its rise out of the depth; the subject keeps
+    // its own scale (and `--steps` its exact height) under it
+    let rise = p.tilt.map_or(0.0, |t| t.rise(p.width_mm, height_mm));
+    if rise >= 0.9 * p.depth_mm {
+        bail!(
+            "--tilt: the plane rises {rise:.2} mm over the panel, leaving too little of the {} mm depth for the relief; use a smaller angle or a deeper relief",
+            p.depth_mm
+        );
+    }
+    let subject = p.depth_mm - rise;
+    if let Some(s) = p.steps_mm.filter(|&s| s >= subject) {
+        bail!("--steps {s}: must be smaller than the depth left under the tilt ({subject:.2} mm)");
+    }
     let mut heights = match p.method {
         Method::Linear => t.time("linear scale", || {
-            to_mm(&field.depth.map(|v| *v as f64), p.depth_mm)
+            to_mm(&field.depth.map(|v| *v as f64), subject)
         }),
         Method::Gradient => {
             let (mut gx, mut gy) = (field.gx.clone(), field.gy.clone());
@@ -173,16 +239,16 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                     // main solve is not worth doing
                     let steps = t.time("poisson (steps)", || solve(&field.sx, &field.sy));
                     let nf = field.n_fine as f64;
-                    if s * nf * range(&steps, &steps, 0.0) >= p.depth_mm {
+                    if s * nf * range(&steps, &steps, 0.0) >= subject {
                         bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");
                     }
                     let main = t.time("poisson", || solve(&gx, &gy));
                     // choose c so a unit step (1 / n_fine of h) becomes s mm
                     // after the final scaling to depth
-                    let mut c = s * nf * range(&main, &steps, 0.0) / p.depth_mm;
+                    let mut c = s * nf * range(&main, &steps, 0.0) / subject;
                     let mut converged = false;
                     for _ in 0..200 {
-                        let next = s * nf * range(&main, &steps, c) / p.depth_mm;
+                        let next = s * nf * range(&main, &steps, c) / subject;
                         converged = (next - c).abs() <= 1e-9 * c.abs();
                         c = next;
                         if converged || !c.is_finite() {
@@ -198,12 +264,18 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                         .par_iter_mut()
                         .zip(steps.data.par_iter())
                         .for_each(|(a, b)| *a += c * b);
-                    to_mm(&total, p.depth_mm)
+                    to_mm(&total, subject)
                 }
-                _ => to_mm(&t.time("poisson", || solve(&gx, &gy)), p.depth_mm),
+                _ => to_mm(&t.time("poisson", || solve(&gx, &gy)), subject),
             }
         }
     };
+    if let Some(f) = &p.fade {
+        panel::fade(&mut heights, f);
+    }
+    if let Some(t) = &p.tilt {
+        panel::tilt(&mut heights, t, p.width_mm, height_mm);
+    }
     if p.invert {
         heights
             .data
@@ -216,7 +288,7 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
     Ok(Relief {
         heights,
         width_mm: p.width_mm,
-        height_mm: p.width_mm * h as f64 / w as f64,
+        height_mm,
         depth_mm: p.depth_mm,
     })
 }

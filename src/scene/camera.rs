@@ -33,6 +33,69 @@ impl View {
     }
 }
 
+/// Which model axis points up. Front is then the model's own front: +z for
+/// y-up models (the OBJ and glTF habit), -y for z-up models (STL and CAD).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum, serde::Serialize)]
+pub enum Up {
+    #[default]
+    #[value(name = "y")]
+    #[serde(rename = "y")]
+    Y,
+    #[value(name = "z")]
+    #[serde(rename = "z")]
+    Z,
+    #[value(name = "-y")]
+    #[serde(rename = "-y")]
+    NegY,
+    #[value(name = "-z")]
+    #[serde(rename = "-z")]
+    NegZ,
+    #[value(name = "x")]
+    #[serde(rename = "x")]
+    X,
+    #[value(name = "-x")]
+    #[serde(rename = "-x")]
+    NegX,
+}
+
+impl Up {
+    /// The rotation from model coordinates to the y-up, +z-front frame the
+    /// presets are defined in, as the images of the model's x, y, z axes.
+    fn to_frame(self) -> [DVec3; 3] {
+        let v = DVec3::new;
+        match self {
+            Up::Y => [DVec3::X, DVec3::Y, DVec3::Z],
+            // (x, y, z) -> (x, z, -y): +z up, -y front
+            Up::Z => [v(1.0, 0.0, 0.0), v(0.0, 0.0, -1.0), v(0.0, 1.0, 0.0)],
+            // half a turn about z: -y up, +z front
+            Up::NegY => [v(-1.0, 0.0, 0.0), v(0.0, -1.0, 0.0), DVec3::Z],
+            // (x, y, z) -> (x, -z, y): -z up, +y front
+            Up::NegZ => [v(1.0, 0.0, 0.0), v(0.0, 0.0, 1.0), v(0.0, -1.0, 0.0)],
+            // a quarter turn about z: +x up, +z front
+            Up::X => [v(0.0, 1.0, 0.0), v(-1.0, 0.0, 0.0), DVec3::Z],
+            Up::NegX => [v(0.0, -1.0, 0.0), v(1.0, 0.0, 0.0), DVec3::Z],
+        }
+    }
+
+    /// A vector of the preset frame in model coordinates (the inverse
+    /// rotation: the transpose).
+    fn to_model(self, f: DVec3) -> DVec3 {
+        let [x, y, z] = self.to_frame();
+        DVec3::new(x.dot(f), y.dot(f), z.dot(f))
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Up::Y => "y",
+            Up::Z => "z",
+            Up::NegY => "-y",
+            Up::NegZ => "-z",
+            Up::X => "x",
+            Up::NegX => "-x",
+        }
+    }
+}
+
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct Camera {
     pub view: View,
@@ -42,6 +105,10 @@ pub struct Camera {
     pub pitch: f64,
     /// Full vertical/horizontal field of view in degrees; 0 = orthographic.
     pub fov: f64,
+    /// The model's up axis.
+    pub up: Up,
+    /// Turn of the picture, counter-clockwise, degrees.
+    pub roll: f64,
 }
 
 impl Default for Camera {
@@ -51,6 +118,8 @@ impl Default for Camera {
             yaw: 0.0,
             pitch: 0.0,
             fov: 20.0,
+            up: Up::Y,
+            roll: 0.0,
         }
     }
 }
@@ -71,13 +140,14 @@ impl Camera {
                 self.fov
             );
         }
-        if !self.yaw.is_finite() || !self.pitch.is_finite() {
-            bail!("--yaw/--pitch must be finite numbers");
+        if !self.yaw.is_finite() || !self.pitch.is_finite() || !self.roll.is_finite() {
+            bail!("--yaw/--pitch/--roll must be finite numbers");
         }
         Ok(())
     }
 
-    /// Eye direction e (from scene centre toward the eye), image right r and up u.
+    /// Eye direction e (from scene centre toward the eye), image right r
+    /// and up u, in model coordinates.
     pub fn basis(&self) -> (DVec3, DVec3, DVec3) {
         let (y0, p0) = self.view.angles();
         let yaw = (y0 + self.yaw).to_radians();
@@ -89,7 +159,10 @@ impl Camera {
         );
         let r = DVec3::new(yaw.cos(), 0.0, -yaw.sin());
         let u = e.cross(r);
-        (e, r, u)
+        let (s, c) = self.roll.to_radians().sin_cos();
+        let (r, u) = (r * c - u * s, r * s + u * c);
+        let m = |v: DVec3| self.up.to_model(v);
+        (m(e), m(r), m(u))
     }
 
     /// Project `positions` into an image whose long side is `long_px`
@@ -200,6 +273,36 @@ mod tests {
         }
         .basis();
         assert!((e - DVec3::Y).length() < 1e-12 && (u + DVec3::Z).length() < 1e-12);
+    }
+
+    #[test]
+    fn up_axes_put_the_model_front_before_the_eye() {
+        let cam = |up, roll| Camera {
+            up,
+            roll,
+            ..Default::default()
+        };
+        // z-up: the eye on -y, the picture's up along +z
+        let (e, r, u) = cam(Up::Z, 0.0).basis();
+        assert!((e + DVec3::Y).length() < 1e-12 && (u - DVec3::Z).length() < 1e-12);
+        assert!((r - DVec3::X).length() < 1e-12);
+        for up in [Up::Y, Up::Z, Up::NegY, Up::NegZ, Up::X, Up::NegX] {
+            let (e, r, u) = cam(up, 0.0).basis();
+            assert!((r.cross(u) - e).length() < 1e-12, "{up:?} is a reflection");
+            let axis = match up {
+                Up::Y => DVec3::Y,
+                Up::Z => DVec3::Z,
+                Up::NegY => -DVec3::Y,
+                Up::NegZ => -DVec3::Z,
+                Up::X => DVec3::X,
+                Up::NegX => -DVec3::X,
+            };
+            assert!((u - axis).length() < 1e-12, "{up:?}: picture up {u}");
+        }
+        // a quarter roll counter-clockwise: what was at the right is now on top
+        let (_, r0, _) = cam(Up::Y, 0.0).basis();
+        let (_, _, u1) = cam(Up::Y, 90.0).basis();
+        assert!((u1 - r0).length() < 1e-12);
     }
 
     #[test]

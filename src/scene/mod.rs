@@ -7,7 +7,7 @@ pub mod image_input;
 pub mod mesh;
 pub mod raster;
 
-pub use camera::{Camera, View};
+pub use camera::{Camera, Up, View};
 pub use mesh::Mesh;
 pub use raster::DepthMap;
 
