@@ -243,3 +243,46 @@ fn fade_tilt_and_a_flat_warning() {
     assert!(said.contains("warning: the relief is flat"), "{said}");
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// `--flat-background`: the field is one plane and the subject stands on
+/// it: no foreground sample below the background, within one 16-bit step.
+#[test]
+fn the_flat_field_stays_below_the_subject() {
+    for (model, cam) in [
+        ("stanford-bunny.obj", Camera::default()),
+        (
+            "armadillo.obj",
+            Camera {
+                view: View::Back,
+                ..Camera::default()
+            },
+        ),
+        (
+            "teaset.obj",
+            Camera {
+                pitch: 45.0,
+                ..Camera::default()
+            },
+        ),
+    ] {
+        let mut p = params(None);
+        p.flat_background = true;
+        let (h, f, _) = relief(model, cam, 160, &p);
+        let (mut bg_lo, mut bg_hi, mut fg_lo) = (f32::MAX, f32::MIN, f32::MAX);
+        for (v, m) in h.data.iter().zip(&f.mask.data) {
+            if *m {
+                fg_lo = fg_lo.min(*v);
+            } else {
+                bg_lo = bg_lo.min(*v);
+                bg_hi = bg_hi.max(*v);
+            }
+        }
+        eprintln!("{model}: background {bg_lo}..{bg_hi} mm, lowest subject sample {fg_lo} mm");
+        assert!(bg_hi - bg_lo <= 1e-6, "{model}: the background is not flat");
+        assert!(
+            fg_lo >= bg_hi - 5.0 / 65535.0,
+            "{model}: a subject sample lies {} mm below the field",
+            bg_hi - fg_lo
+        );
+    }
+}

@@ -78,6 +78,60 @@ fn extent(v: impl ParallelIterator<Item = f64>) -> (f64, f64) {
         .reduce(|| (f64::MAX, f64::MIN), |x, y| (x.0.min(y.0), x.1.max(y.1)))
 }
 
+/// With a flat background: raise each connected part of the subject (4-
+/// neighbours in `mask`) by what its lowest sample lies below the field
+/// (0), so that no part of it sinks into the background. The integrated
+/// slopes may run downhill from an outline (an ear behind a head); the
+/// part then stands on a step that height all round. Returns the largest
+/// lift.
+fn lift_above_field(h: &mut Grid<f64>, mask: &Grid<bool>) -> f64 {
+    let (w, n) = (h.w, h.data.len());
+    let mut part = vec![u32::MAX; n];
+    let mut lows = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..n {
+        if !mask.data[start] || part[start] != u32::MAX {
+            continue;
+        }
+        let k = lows.len() as u32;
+        let mut low = 0.0f64;
+        part[start] = k;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            low = low.min(h.data[i]);
+            let (x, y) = (i % w, i / w);
+            let mut visit = |j: usize| {
+                if mask.data[j] && part[j] == u32::MAX {
+                    part[j] = k;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < w {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - w);
+            }
+            if i + w < n {
+                visit(i + w);
+            }
+        }
+        lows.push(-low);
+    }
+    h.data
+        .par_iter_mut()
+        .zip(part.par_iter())
+        .for_each(|(v, &k)| {
+            if k != u32::MAX {
+                *v += lows[k as usize];
+            }
+        });
+    lows.into_iter().fold(0.0, f64::max)
+}
+
 /// Range (max - min) of a + c b.
 fn range(a: &Grid<f64>, b: &Grid<f64>, c: f64) -> f64 {
     let (lo, hi) = extent(
@@ -242,7 +296,10 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                     if s * nf * range(&steps, &steps, 0.0) >= subject {
                         bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");
                     }
-                    let main = t.time("poisson", || solve(&gx, &gy));
+                    let mut main = t.time("poisson", || solve(&gx, &gy));
+                    if p.flat_background {
+                        lift_above_field(&mut main, &field.mask);
+                    }
                     // choose c so a unit step (1 / n_fine of h) becomes s mm
                     // after the final scaling to depth
                     let mut c = s * nf * range(&main, &steps, 0.0) / subject;
@@ -264,9 +321,18 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                         .par_iter_mut()
                         .zip(steps.data.par_iter())
                         .for_each(|(a, b)| *a += c * b);
+                    if p.flat_background {
+                        lift_above_field(&mut total, &field.mask);
+                    }
                     to_mm(&total, subject)
                 }
-                _ => to_mm(&t.time("poisson", || solve(&gx, &gy)), subject),
+                _ => {
+                    let mut h = t.time("poisson", || solve(&gx, &gy));
+                    if p.flat_background {
+                        lift_above_field(&mut h, &field.mask);
+                    }
+                    to_mm(&h, subject)
+                }
             }
         }
     };
