@@ -60,6 +60,9 @@ pub struct ReliefJob {
     pub mirror: bool,
     pub invert: bool,
     pub method: Method,
+    /// Smooth shading: slopes from vertex normals, split at creases
+    /// sharper than this many degrees.
+    pub smooth: Option<f64>,
     /// `--fade DIR[:AMOUNT]`, parsed with the other parameters.
     pub fade: Option<String>,
     /// `--tilt DEG[:DIR]`.
@@ -92,6 +95,7 @@ impl Default for ReliefJob {
             mirror: false,
             invert: false,
             method: Method::Gradient,
+            smooth: None,
             fade: None,
             tilt: None,
             output: PathBuf::from("relief.png"),
@@ -161,6 +165,9 @@ impl ReliefJob {
             );
         }
         self.camera.validate()?;
+        if let Some(a) = self.smooth.filter(|a| !(0.0..=180.0).contains(a)) {
+            bail!("--smooth {a}: the crease angle must be 0 to 180 degrees");
+        }
         if !self.base_mm.is_finite() || self.base_mm < 0.0 || self.base_mm > 10_000.0 {
             bail!("--base {}: must be a thickness in mm >= 0", self.base_mm);
         }
@@ -235,7 +242,14 @@ impl ReliefJob {
             None => t.time("load", scene::demo::scene),
         };
         let dm = t.time("rasterize", || {
-            scene::render(&mesh, &self.camera(), self.resolution, 2, pixel_limit(p))
+            scene::render(
+                &mesh,
+                &self.camera(),
+                self.resolution,
+                2,
+                pixel_limit(p),
+                self.smooth,
+            )
         })?;
         if dm.id.data.iter().all(|&i| i == 0) {
             bail!("{}: nothing visible from this view", self.model_name());

@@ -233,7 +233,7 @@ fn mesh_target(bytes: &[u8], stl: bool) {
     };
     if let Ok(m) = m {
         if m.validate("fuzz").is_ok() && m.triangles.len() < 5000 {
-            let _ = scene::render(&m, &Camera::default(), 16, 2, (1 << 26, "allowed"));
+            let _ = scene::render(&m, &Camera::default(), 16, 2, (1 << 26, "allowed"), None);
         }
     }
 }

@@ -14,7 +14,7 @@ fn relief(steps: Option<f64>, res: usize) -> (Grid<f32>, Grid<bool>) {
         pitch: 20.0,
         ..Camera::default()
     };
-    let dm = render(&mesh, &cam, res, 2, (1 << 26, "allowed")).unwrap();
+    let dm = render(&mesh, &cam, res, 2, (1 << 26, "allowed"), None).unwrap();
     let field = shape_field(
         &dm,
         2,

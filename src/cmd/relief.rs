@@ -85,6 +85,10 @@ pub struct ReliefOpts {
     /// Hollow relief (for moulds).
     #[arg(long)]
     pub invert: bool,
+    /// Smooth shading for tessellated models: slopes from vertex normals (the
+    /// OBJ's own, else computed), split at creases sharper than ANGLE degrees.
+    #[arg(long, value_name = "ANGLE", num_args = 0..=1, default_missing_value = "45")]
+    pub smooth: Option<f64>,
     /// Fade the heights linearly toward a side: DIR[:AMOUNT], DIR = right, top,
     /// left, bottom or degrees counter-clockwise from the right; AMOUNT 0..1
     /// (1 = to nothing at that side).
@@ -160,6 +164,7 @@ impl ReliefOpts {
             mirror: self.mirror,
             invert: self.invert,
             method: self.method,
+            smooth: self.smooth,
             fade: self.fade,
             tilt: self.tilt,
             output,

@@ -49,10 +49,11 @@ pub trait Source: Sync {
     fn slope(&self, x: usize, y: usize) -> (f32, f32);
     fn depth(&self, x: usize, y: usize) -> f32;
     fn id(&self, x: usize, y: usize) -> u16;
-    /// Whether the edges to (x + 1, y) and (x, y + 1) are outlines, given
-    /// the slopes `g` there. Without geometry: a slope above the threshold.
-    fn outlines(&self, _x: usize, _y: usize, g: (f32, f32), threshold: f32) -> (bool, bool) {
-        (g.0.abs() > threshold, g.1.abs() > threshold)
+    /// The slopes of the edges to (x + 1, y) and (x, y + 1) and whether
+    /// each is an outline. Without geometry: a slope above the threshold.
+    fn edges(&self, x: usize, y: usize, threshold: f32) -> RawEdge {
+        let g = self.slope(x, y);
+        (g, (g.0.abs() > threshold, g.1.abs() > threshold))
     }
 }
 
@@ -84,16 +85,32 @@ impl Source for DepthMap {
     /// A rendered mesh: an edge is an outline where the two samples do not
     /// show one continuous surface (see `Surfaces::outline`), with the
     /// threshold as the largest depth mismatch, in slope units, that still
-    /// counts as continuous; a steep surface is not an outline.
-    fn outlines(&self, x: usize, y: usize, g: (f32, f32), threshold: f32) -> (bool, bool) {
+    /// counts as continuous; a steep surface is not an outline. With smooth
+    /// shading, a surface edge's slope is the mean of the two samples'
+    /// slopes from interpolated normals instead of their difference.
+    fn edges(&self, x: usize, y: usize, threshold: f32) -> RawEdge {
+        let mut g = self.slope(x, y);
         let Some(s) = &self.surfaces else {
-            return (g.0.abs() > threshold, g.1.abs() > threshold);
+            return (g, (g.0.abs() > threshold, g.1.abs() > threshold));
         };
-        let tol = threshold as f64 / self.h.w.max(self.h.h) as f64;
-        (
+        let n = self.h.w.max(self.h.h) as f64;
+        let tol = threshold as f64 / n;
+        let sil = (
             x + 1 < self.h.w && s.outline((x, y), (x + 1, y), tol),
             y + 1 < self.h.h && s.outline((x, y), (x, y + 1), tol),
-        )
+        );
+        if let Some(here) = s.smooth_slope(x, y) {
+            let mean = |other: Option<[f64; 2]>, k: usize| {
+                other.map(|o| (n * (here[k] + o[k]) / 2.0) as f32)
+            };
+            if x + 1 < self.h.w && !sil.0 {
+                g.0 = mean(s.smooth_slope(x + 1, y), 0).unwrap_or(g.0);
+            }
+            if y + 1 < self.h.h && !sil.1 {
+                g.1 = mean(s.smooth_slope(x, y + 1), 1).unwrap_or(g.1);
+            }
+        }
+        (g, sil)
     }
 }
 
@@ -163,7 +180,7 @@ fn dominated(v: f32, before: (f32, bool), after: (f32, bool)) -> bool {
 }
 
 /// A source sample's raw slopes and whether its two edges are outlines.
-type RawEdge = ((f32, f32), (bool, bool));
+pub type RawEdge = ((f32, f32), (bool, bool));
 
 /// Output rows made per parallel task (source rows shared between
 /// neighbouring output rows are shaped once per block).
@@ -258,10 +275,7 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                 let rb = (fb + 1).min(fh);
                 raw.clear();
                 for fy in ra..rb {
-                    raw.extend((0..fw).map(|x| {
-                        let g = src.slope(x, fy);
-                        (g, src.outlines(x, fy, g, threshold))
-                    }));
+                    raw.extend((0..fw).map(|x| src.edges(x, fy, threshold)));
                 }
                 let rawat = |fy: usize, fx: usize| raw[(fy - ra) * fw + fx];
                 let sa = fa.saturating_sub(1);

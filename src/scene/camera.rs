@@ -130,6 +130,7 @@ pub struct Projection {
     pub points: Vec<[f64; 3]>,
     pub w: usize,
     pub h: usize,
+    pub frame: Frame,
 }
 
 impl Camera {
@@ -169,6 +170,17 @@ impl Camera {
     /// pixels times `supersample`; the frame hugs the scene with a small
     /// margin of background so every outline lies inside.
     pub fn project(&self, positions: &[DVec3], long_px: usize, supersample: usize) -> Projection {
+        let f = self.frame(positions, long_px, supersample);
+        Projection {
+            points: positions.iter().map(|p| f.screen(*p)).collect(),
+            w: f.w,
+            h: f.h,
+            frame: f,
+        }
+    }
+
+    /// The fitted frame: how any point maps to the image.
+    pub fn frame(&self, positions: &[DVec3], long_px: usize, supersample: usize) -> Frame {
         let (e, r, u) = self.basis();
         let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
         for p in positions {
@@ -187,23 +199,28 @@ impl Camera {
         } else {
             radius
         };
-        // (screen x, screen y, distance along the view axis)
-        let view: Vec<[f64; 3]> = positions
-            .iter()
-            .map(|p| {
-                let d = *p - c;
-                let z = dist - d.dot(e);
-                let (x, y) = (d.dot(r), d.dot(u));
-                if persp {
-                    [x / z, y / z, z]
-                } else {
-                    [x, y, z]
-                }
-            })
-            .collect();
+        let mut f = Frame {
+            c,
+            e,
+            r,
+            u,
+            dist,
+            persp,
+            radius,
+            x0: 0.0,
+            y1: 0.0,
+            margin: 0.0,
+            s: 1.0,
+            near: 0.0,
+            far: 1.0,
+            flat: false,
+            w: 0,
+            h: 0,
+        };
         let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
         let (mut near, mut far) = (f64::MAX, f64::MIN);
-        for v in &view {
+        for p in positions {
+            let v = f.view(*p);
             x0 = x0.min(v[0]);
             x1 = x1.max(v[0]);
             y0 = y0.min(v[1]);
@@ -217,30 +234,107 @@ impl Camera {
         let scale = long_px as f64 / ex.max(ey);
         let w = ((ex * scale).round() as usize).max(1);
         let h = ((ey * scale).round() as usize).max(1);
-        let s = scale * supersample as f64;
-        let flat = far - near <= 1e-9 * radius;
-        let points = view
-            .iter()
-            .map(|v| {
-                let depth = if flat {
-                    1.0
-                } else if persp {
-                    (1.0 / v[2] - 1.0 / far) / (1.0 / near - 1.0 / far)
-                } else {
-                    (far - v[2]) / (far - near)
-                };
-                [
-                    (v[0] - x0 + margin) * s,
-                    (y1 + margin - v[1]) * s,
-                    depth.clamp(0.0, 1.0),
-                ]
-            })
-            .collect();
-        Projection {
-            points,
-            w: w * supersample,
-            h: h * supersample,
+        f.x0 = x0;
+        f.y1 = y1;
+        f.margin = margin;
+        f.s = scale * supersample as f64;
+        f.near = near;
+        f.far = far;
+        f.flat = far - near <= 1e-9 * radius;
+        f.w = w * supersample;
+        f.h = h * supersample;
+        f
+    }
+}
+
+/// How the camera maps the scene to the image.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame {
+    c: DVec3,
+    e: DVec3,
+    r: DVec3,
+    u: DVec3,
+    dist: f64,
+    persp: bool,
+    /// Radius of the scene about its centre.
+    pub radius: f64,
+    x0: f64,
+    y1: f64,
+    margin: f64,
+    s: f64,
+    near: f64,
+    far: f64,
+    flat: bool,
+    pub w: usize,
+    pub h: usize,
+}
+
+impl Frame {
+    /// (screen x, screen y, distance along the view axis).
+    fn view(&self, p: DVec3) -> [f64; 3] {
+        let d = p - self.c;
+        let z = self.dist - d.dot(self.e);
+        let (x, y) = (d.dot(self.r), d.dot(self.u));
+        if self.persp {
+            [x / z, y / z, z]
+        } else {
+            [x, y, z]
         }
+    }
+
+    /// (x right, y down, in pixels; depth h in [0,1], 1 = nearest).
+    pub fn screen(&self, p: DVec3) -> [f64; 3] {
+        let q = self.screen_unclamped(p);
+        [q[0], q[1], q[2].clamp(0.0, 1.0)]
+    }
+
+    fn screen_unclamped(&self, p: DVec3) -> [f64; 3] {
+        let v = self.view(p);
+        let depth = if self.flat {
+            1.0
+        } else if self.persp {
+            (1.0 / v[2] - 1.0 / self.far) / (1.0 / self.near - 1.0 / self.far)
+        } else {
+            (self.far - v[2]) / (self.far - self.near)
+        };
+        [
+            (v[0] - self.x0 + self.margin) * self.s,
+            (self.y1 + self.margin - v[1]) * self.s,
+            depth,
+        ]
+    }
+
+    /// Direction from `p` toward the eye.
+    pub fn to_eye(&self, p: DVec3) -> DVec3 {
+        if self.persp {
+            self.c + self.e * self.dist - p
+        } else {
+            self.e
+        }
+    }
+
+    /// The depth slope (h per pixel, x and y) of the plane through `p`
+    /// with normal `n`, as the image sees it; `None` where the plane is
+    /// seen edge-on or from behind.
+    pub fn plane_slope(&self, p: DVec3, n: DVec3) -> Option<[f64; 2]> {
+        if self.flat || n.dot(self.to_eye(p)) <= 1e-6 * n.length() * self.to_eye(p).length() {
+            return None;
+        }
+        let n = n.normalize();
+        let t1 = n.any_orthonormal_vector();
+        let t2 = n.cross(t1);
+        let eps = 1e-4 * self.radius;
+        let q0 = self.screen_unclamped(p);
+        let q1 = self.screen_unclamped(p + t1 * eps);
+        let q2 = self.screen_unclamped(p + t2 * eps);
+        let (dx1, dy1, dh1) = (q1[0] - q0[0], q1[1] - q0[1], q1[2] - q0[2]);
+        let (dx2, dy2, dh2) = (q2[0] - q0[0], q2[1] - q0[1], q2[2] - q0[2]);
+        let det = dx1 * dy2 - dx2 * dy1;
+        let scale = (dx1 * dx1 + dy1 * dy1).max(dx2 * dx2 + dy2 * dy2);
+        if det.abs() <= 1e-6 * scale {
+            return None;
+        }
+        Some([(dh1 * dy2 - dh2 * dy1) / det, (dx1 * dh2 - dx2 * dh1) / det])
     }
 }
 

@@ -16,6 +16,10 @@ pub struct Mesh {
     /// Index into `objects` for each triangle.
     pub tri_object: Vec<u16>,
     pub objects: Vec<String>,
+    /// Normals from the file (OBJ `vn`) and, per triangle, the normal of
+    /// each corner; empty when the file has none for some triangle.
+    pub normals: Vec<Vec3>,
+    pub normal_tris: Vec<[u32; 3]>,
 }
 
 impl Mesh {
@@ -30,6 +34,9 @@ impl Mesh {
         self.tri_object
             .extend(other.tri_object.iter().map(|o| o + obase));
         self.objects.extend(other.objects.iter().cloned());
+        // file normals would not cover both parts: computed ones serve
+        self.normals.clear();
+        self.normal_tris.clear();
     }
 
     /// Add one named object from raw parts.
@@ -42,6 +49,62 @@ impl Mesh {
             .extend(triangles.iter().map(|t| t.map(|i| i + base)));
         self.tri_object
             .extend(std::iter::repeat_n(id, triangles.len()));
+    }
+
+    /// A normal per triangle corner for smooth shading: the file's own
+    /// normals where it has them, else the area-weighted mean of the faces
+    /// around the vertex (vertices welded by position) that lie within
+    /// `crease_deg` of the corner's face, so real creases stay sharp.
+    pub fn corner_normals(&self, crease_deg: f64) -> Vec<[Vec3; 3]> {
+        if !self.normal_tris.is_empty() && self.normal_tris.len() == self.triangles.len() {
+            return self
+                .normal_tris
+                .iter()
+                .map(|t| t.map(|i| self.normals[i as usize]))
+                .collect();
+        }
+        // weld by exact position: seams of patches share no indices
+        let mut canon = std::collections::HashMap::new();
+        let weld: Vec<u32> = self
+            .positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                *canon
+                    .entry(p.to_array().map(f32::to_bits))
+                    .or_insert(i as u32)
+            })
+            .collect();
+        let face: Vec<Vec3> = self
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| self.positions[i as usize]);
+                (b - a).cross(c - a)
+            })
+            .collect();
+        let mut around: Vec<Vec<u32>> = vec![Vec::new(); self.positions.len()];
+        for (f, t) in self.triangles.iter().enumerate() {
+            for &i in t {
+                around[weld[i as usize] as usize].push(f as u32);
+            }
+        }
+        let cos = crease_deg.to_radians().cos() as f32;
+        self.triangles
+            .iter()
+            .enumerate()
+            .map(|(f, t)| {
+                let own = face[f].normalize_or_zero();
+                t.map(|i| {
+                    let n: Vec3 = around[weld[i as usize] as usize]
+                        .iter()
+                        .map(|&g| face[g as usize])
+                        .filter(|g| g.normalize_or_zero().dot(own) >= cos)
+                        .sum();
+                    n.normalize_or(own)
+                })
+            })
+            .collect()
     }
 
     /// Axis-aligned bounds of the vertices that triangles use.
@@ -143,6 +206,7 @@ pub fn read_obj(reader: &mut impl BufRead, what: &str) -> Result<Mesh> {
         tobj::load_obj_buf(reader, &opts, |_| Err(tobj::LoadError::OpenFileFailed)).ctx(what)?;
     check_triangles(models.iter().map(|m| m.mesh.indices.len() / 3).sum(), what)?;
     let mut mesh = Mesh::default();
+    let mut all_normals = true;
     for m in &models {
         let p = &m.mesh.positions;
         let pos: Vec<Vec3> = p
@@ -157,7 +221,28 @@ pub fn read_obj(reader: &mut impl BufRead, what: &str) -> Result<Mesh> {
             .collect();
         if !tris.is_empty() {
             mesh.push_object(&m.name, &pos, &tris);
+            all_normals &= m.mesh.normal_indices.len() == m.mesh.indices.len();
+            let base = mesh.normals.len() as u32;
+            mesh.normals.extend(
+                m.mesh
+                    .normals
+                    .chunks_exact(3)
+                    .map(|c| Vec3::new(c[0], c[1], c[2])),
+            );
+            mesh.normal_tris.extend(
+                m.mesh
+                    .normal_indices
+                    .chunks_exact(3)
+                    .map(|c| [c[0] + base, c[1] + base, c[2] + base]),
+            );
         }
+    }
+    let n = mesh.normals.len() as u32;
+    let usable = mesh.normal_tris.iter().flatten().all(|&i| i < n)
+        && mesh.normals.iter().all(|v| v.is_finite());
+    if !all_normals || !usable {
+        mesh.normals.clear();
+        mesh.normal_tris.clear();
     }
     Ok(mesh)
 }

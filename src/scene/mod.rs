@@ -14,7 +14,9 @@ pub use raster::DepthMap;
 use crate::bail;
 use crate::error::Result;
 
-/// Render `mesh` as seen by `cam`, long side `long_px` times `supersample`.
+/// Render `mesh` as seen by `cam`, long side `long_px` times `supersample`;
+/// with `smooth` (a crease angle in degrees), surfaces carry slopes from
+/// smooth vertex normals.
 /// A relief of more than `max_pixels` is refused before any memory is
 /// taken for it (the 16384 px demo, 159 million pixels, took 10 GB), the
 /// error saying `why` the limit is what it is.
@@ -24,6 +26,7 @@ pub fn render(
     long_px: usize,
     supersample: usize,
     (max_pixels, why): (usize, &str),
+    smooth: Option<f64>,
 ) -> Result<DepthMap> {
     let pos: Vec<glam::DVec3> = mesh.positions.iter().map(|p| p.as_dvec3()).collect();
     let pr = cam.project(&pos, long_px, supersample);
@@ -45,11 +48,55 @@ pub fn render(
         );
     }
     let ids: Vec<u16> = mesh.tri_object.iter().map(|o| o + 1).collect();
-    let (h, id, surfaces) = raster::rasterize(&pr.points, &mesh.triangles, &ids, pr.w, pr.h);
+    let slopes = smooth.map(|angle| corner_slopes(mesh, &pos, &pr, angle));
+    let (h, id, surfaces) = raster::rasterize(
+        &pr.points,
+        &mesh.triangles,
+        &ids,
+        slopes.as_deref(),
+        pr.w,
+        pr.h,
+    );
     Ok(DepthMap {
         h,
         id,
         objects: mesh.objects.clone(),
         surfaces: Some(surfaces),
     })
+}
+
+/// Each triangle corner's depth slope in the image from its smooth normal;
+/// a corner whose normal faces away or is seen edge-on keeps its face's
+/// own slope.
+fn corner_slopes(
+    mesh: &Mesh,
+    pos: &[glam::DVec3],
+    pr: &camera::Projection,
+    crease_deg: f64,
+) -> Vec<raster::CornerSlopes> {
+    use rayon::prelude::*;
+    let normals = mesh.corner_normals(crease_deg);
+    mesh.triangles
+        .par_iter()
+        .zip(normals.par_iter())
+        .map(|(t, n)| {
+            let p = t.map(|i| pos[i as usize]);
+            let mut face = (p[1] - p[0]).cross(p[2] - p[0]);
+            if face.dot(pr.frame.to_eye(p[0])) < 0.0 {
+                face = -face; // seen from its back: its normals turn too
+            }
+            let flat = pr.frame.plane_slope(p[0], face);
+            let mut out = [[0.0f32; 2]; 3];
+            for k in 0..3 {
+                // the file's normals may face either way: the face decides
+                let mut nk = n[k].as_dvec3();
+                if nk.dot(face) < 0.0 {
+                    nk = -nk;
+                }
+                let s = pr.frame.plane_slope(p[k], nk).or(flat).unwrap_or([0.0; 2]);
+                out[k] = [s[0] as f32, s[1] as f32];
+            }
+            out
+        })
+        .collect()
 }

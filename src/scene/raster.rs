@@ -28,7 +28,13 @@ pub struct Surfaces {
     /// 1 + index into `tris` per sample; 0 = background.
     pub tri: Grid<u32>,
     tris: Vec<Setup>,
+    /// Whether the triangles carry slopes from smooth normals.
+    smooth: bool,
 }
+
+/// Depth slopes (h per pixel in x and y) of a triangle's tangent planes at
+/// its three corners, from smooth vertex normals.
+pub type CornerSlopes = [[f32; 2]; 3];
 
 /// One triangle ready to scan: vertices in fixed point, counter-oriented so
 /// that the inside has positive edge values.
@@ -46,9 +52,12 @@ struct Setup {
     id: u16,
     /// The plane h = a x + b y + c in fixed-point pixel coordinates.
     plane: [f64; 3],
+    /// Smooth slopes at the corners (in the order of `v`), if any.
+    corner: CornerSlopes,
 }
 
-fn setup(p: [[f64; 3]; 3], id: u16, w: usize, h: usize) -> Option<Setup> {
+fn setup(p: [[f64; 3]; 3], id: u16, corner: CornerSlopes, w: usize, h: usize) -> Option<Setup> {
+    let mut corner = corner;
     let mut v = p.map(|q| {
         [
             (q[0] * SUB as f64).round() as i64,
@@ -66,6 +75,7 @@ fn setup(p: [[f64; 3]; 3], id: u16, w: usize, h: usize) -> Option<Setup> {
     if area < 0 {
         v.swap(1, 2);
         hh.swap(1, 2);
+        corner.swap(1, 2);
         area = -area;
     }
     let bias = [0, 1, 2].map(|k| {
@@ -102,6 +112,7 @@ fn setup(p: [[f64; 3]; 3], id: u16, w: usize, h: usize) -> Option<Setup> {
         area,
         bias,
         plane,
+        corner,
         x0: x0 as usize,
         x1: x1 as usize,
         y0: y0 as usize,
@@ -136,13 +147,18 @@ fn prepare(
     points: &[[f64; 3]],
     tris: &[[u32; 3]],
     ids: &[u16],
+    slopes: Option<&[CornerSlopes]>,
     w: usize,
     h: usize,
 ) -> (Vec<Setup>, Vec<Vec<u32>>) {
     let setups: Vec<Setup> = tris
         .par_iter()
         .zip(ids.par_iter())
-        .filter_map(|(t, &id)| setup(t.map(|i| points[i as usize]), id, w, h))
+        .enumerate()
+        .filter_map(|(k, (t, &id))| {
+            let corner = slopes.map_or([[0.0; 2]; 3], |s| s[k]);
+            setup(t.map(|i| points[i as usize]), id, corner, w, h)
+        })
         .collect();
     let mut bins = vec![Vec::new(); h.div_ceil(STRIP)];
     for (k, s) in setups.iter().enumerate() {
@@ -155,15 +171,17 @@ fn prepare(
 
 /// Rasterize triangles (pixel-space points with depth) into a `w x h`
 /// depth buffer; the nearest surface (largest h) wins. `ids[k]` is the
-/// object id (> 0) of triangle k.
+/// object id (> 0) of triangle k; `slopes[k]`, if given, its smooth
+/// corner slopes.
 pub fn rasterize(
     points: &[[f64; 3]],
     tris: &[[u32; 3]],
     ids: &[u16],
+    slopes: Option<&[CornerSlopes]>,
     w: usize,
     h: usize,
 ) -> (Grid<f32>, Grid<u16>, Surfaces) {
-    let (setups, bins) = prepare(points, tris, ids, w, h);
+    let (setups, bins) = prepare(points, tris, ids, slopes, w, h);
     let mut depth = Grid::new(w, h, 0.0f32);
     let mut idg = Grid::new(w, h, 0u16);
     let mut tri = Grid::new(w, h, 0u32);
@@ -190,7 +208,11 @@ pub fn rasterize(
                 });
             }
         });
-    let surfaces = Surfaces { tri, tris: setups };
+    let surfaces = Surfaces {
+        tri,
+        tris: setups,
+        smooth: slopes.is_some(),
+    };
     (depth, idg, surfaces)
 }
 
@@ -224,6 +246,28 @@ impl Surfaces {
             (x as i64 * SUB + SUB / 2) as f64,
             (y as i64 * SUB + SUB / 2) as f64,
         ]
+    }
+
+    /// The smooth slope (h per pixel) at sample (x, y): the corner slopes
+    /// interpolated across its triangle; `None` without smooth shading or
+    /// on the background.
+    pub fn smooth_slope(&self, x: usize, y: usize) -> Option<[f64; 2]> {
+        let t = *self.tri.get(x, y);
+        if !self.smooth || t == 0 {
+            return None;
+        }
+        let s = &self.tris[t as usize - 1];
+        let p = Self::centre(x, y);
+        let mut g = [0.0; 2];
+        for (k, c) in s.corner.iter().enumerate() {
+            let (a, b) = (s.v[(k + 1) % 3], s.v[(k + 2) % 3]);
+            let e = (b[0] - a[0]) as f64 * (p[1] - a[1] as f64)
+                - (b[1] - a[1]) as f64 * (p[0] - a[0] as f64);
+            let l = e / s.area as f64;
+            g[0] += l * c[0] as f64;
+            g[1] += l * c[1] as f64;
+        }
+        Some(g)
     }
 
     /// Whether the edge between samples a and b (neighbours) is an outline:
@@ -263,7 +307,7 @@ impl Surfaces {
 /// How many triangles cover each pixel centre (for the fill-rule tests).
 pub fn coverage(points: &[[f64; 3]], tris: &[[u32; 3]], w: usize, h: usize) -> Grid<u32> {
     let ids = vec![1u16; tris.len()];
-    let (setups, _) = prepare(points, tris, &ids, w, h);
+    let (setups, _) = prepare(points, tris, &ids, None, w, h);
     let mut g = Grid::new(w, h, 0u32);
     for t in &setups {
         scan(t, 0, h, |x, y, _| g.data[y * w + x] += 1);
@@ -338,7 +382,7 @@ mod tests {
             [10.0, 0.0, 0.1],
             [0.0, 10.0, 0.1],
         ];
-        let (d, id, _) = rasterize(&pts, &[[0, 1, 2], [3, 4, 5]], &[1, 2], 10, 10);
+        let (d, id, _) = rasterize(&pts, &[[0, 1, 2], [3, 4, 5]], &[1, 2], None, 10, 10);
         assert_eq!(*id.get(0, 0), 2);
         assert_eq!(*id.get(7, 1), 1);
         assert!((*d.get(7, 1) - 0.2).abs() < 1e-6);
