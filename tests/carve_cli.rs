@@ -106,6 +106,10 @@ fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> Residual {
     let mut args = vec!["carve"];
     if let Some(m) = model {
         args.push(m);
+        if m.ends_with(".stl") {
+            // the test STL is modelled y-up, face toward +z
+            args.extend(["--up", "y"]);
+        }
     }
     args.extend([
         "--resolution",
@@ -190,7 +194,8 @@ fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> Residual {
         }
         counted += 1;
         over_ideal = over_ideal.max(got[i] - depth - ideal[i].max(t));
-        let excess = got[i] - depth - t - scallop_at(i);
+        // over what the tool can reach there (within 5 um of the target)
+        let excess = got[i] - depth - reach[i].max(t) - scallop_at(i);
         if excess > worst {
             worst = excess;
             if std::env::var("SHOW").is_ok() {

@@ -135,6 +135,8 @@ fn outputs_and_options() {
     ok(&run(&[
         "relief",
         &fixture("suzanne.stl"),
+        "--up",
+        "y",
         "-o",
         &p("m.png"),
         "--resolution",

@@ -34,8 +34,8 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
         material,
     );
     relievo::output::check_writable(&args.output)?;
-    super::relief::say_up(&rjob, quiet);
     let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
+    super::relief::say_up(&rjob, quiet);
     for w in &r.warnings {
         eprintln!("warning: {w}");
     }

@@ -180,7 +180,6 @@ impl ReliefOpts {
 pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     let mut job = args.opts.job(args.model, args.output);
     job.preview = args.preview;
-    say_up(&job, quiet);
     let pb = spinner(quiet);
     let mut stage = |s: &str| {
         if let Some(pb) = &pb {
@@ -192,6 +191,7 @@ pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> 
         pb.finish_and_clear();
     }
     let s = res?;
+    say_up(&job, quiet);
     for w in &s.warnings {
         eprintln!("warning: {w}");
     }

@@ -169,15 +169,22 @@ fn shape(g: (f32, f32), (sil_x, sil_y): (bool, bool), alpha: f32) -> [f32; 5] {
     ]
 }
 
-/// A run of neighbouring silhouette edges of one sign across an outline
-/// (a surface turning away steeply just before its true edge) is one
-/// outline: only its steepest edge keeps the step. Each neighbour is
-/// (slope, is an outline).
+/// Silhouette edges of one sign close together across an outline (a
+/// surface turning away steeply just before its true edge) are one
+/// outline: only the steepest edge within `STEP_GAP` output samples keeps
+/// the step, so steps never stack. `near(k)` is the edge k samples along
+/// the axis (slope, is an outline), `None` past the buffer.
 #[inline]
-fn dominated(v: f32, before: (f32, bool), after: (f32, bool)) -> bool {
+fn dominated(v: f32, reach: usize, near: impl Fn(isize) -> Option<(f32, bool)>) -> bool {
     let same = |u: (f32, bool)| u.1 && u.0.signum() == v.signum();
-    (same(before) && before.0.abs() > v.abs()) || (same(after) && after.0.abs() >= v.abs())
+    (1..=reach as isize).any(|k| {
+        near(-k).is_some_and(|u| same(u) && u.0.abs() > v.abs())
+            || near(k).is_some_and(|u| same(u) && u.0.abs() >= v.abs())
+    })
 }
+
+/// No two steps lie closer than this many output samples.
+const STEP_GAP: usize = 3;
 
 /// A source sample's raw slopes and whether its two edges are outlines.
 pub type RawEdge = ((f32, f32), (bool, bool));
@@ -269,10 +276,11 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                 // shaped source rows fa .. fb, kept in a per-thread buffer
                 let fa = F * ya;
                 let fb = (F * (yb - 1) + A).min(fh);
-                // raw slopes from two rows above (for the outline test and the
-                // barrier below a silhouette edge) to one row below the block
-                let ra = fa.saturating_sub(2);
-                let rb = (fb + 1).min(fh);
+                // raw slopes from the reach of the step test above the
+                // shaped rows to its reach below
+                let reach = STEP_GAP * F;
+                let ra = fa.saturating_sub(1 + reach);
+                let rb = (fb + reach).min(fh);
                 raw.clear();
                 for fy in ra..rb {
                     raw.extend((0..fw).map(|x| src.edges(x, fy, threshold)));
@@ -284,18 +292,24 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
                     for x in 0..fw {
                         let (g, sil) = rawat(fy, x);
                         let mut p = shape(g, sil, alpha);
-                        let none = ((0.0, 0.0), (false, false));
                         if p[2] != 0.0 {
-                            let b = if x > 0 { rawat(fy, x - 1) } else { none };
-                            let a = if x + 1 < fw { rawat(fy, x + 1) } else { none };
-                            if dominated(g.0, (b.0 .0, b.1 .0), (a.0 .0, a.1 .0)) {
+                            let near = |k: isize| {
+                                let xx = x.checked_add_signed(k).filter(|&xx| xx < fw)?;
+                                let e = rawat(fy, xx);
+                                Some((e.0 .0, e.1 .0))
+                            };
+                            if dominated(g.0, reach, near) {
                                 p[2] = 0.0;
                             }
                         }
                         if p[3] != 0.0 {
-                            let b = if fy > 0 { rawat(fy - 1, x) } else { none };
-                            let a = if fy + 1 < rb { rawat(fy + 1, x) } else { none };
-                            if dominated(g.1, (b.0 .1, b.1 .1), (a.0 .1, a.1 .1)) {
+                            let near = |k: isize| {
+                                let yy =
+                                    fy.checked_add_signed(k).filter(|&yy| yy >= ra && yy < rb)?;
+                                let e = rawat(yy, x);
+                                Some((e.0 .1, e.1 .1))
+                            };
+                            if dominated(g.1, reach, near) {
                                 p[3] = 0.0;
                             }
                         }

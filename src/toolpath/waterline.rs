@@ -130,7 +130,10 @@ pub struct Contour {
 /// a stepover apart there. Rows running along a slope or a concave crease
 /// leave scallops well over the flat scallop of their stepover (up to 4x
 /// on the test models); the waterlines bring them back within 0.01 mm of it.
-pub const GENTLEST: f64 = 0.1;
+/// With outlines from the geometry, the creases where surfaces meet stay in
+/// the relief: at 0.1 the demo kept 0.0103 mm, at 0.08 0.0073 mm (21% more
+/// waterline lines).
+pub const GENTLEST: f64 = 0.08;
 
 /// The closed contours of the CL surface at `level`, each point on the
 /// exact CL surface within LEVEL_TOL below the level.
