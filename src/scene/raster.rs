@@ -252,8 +252,11 @@ impl Surfaces {
     /// interpolated across its triangle; `None` without smooth shading or
     /// on the background.
     pub fn smooth_slope(&self, x: usize, y: usize) -> Option<[f64; 2]> {
+        if !self.smooth {
+            return None;
+        }
         let t = *self.tri.get(x, y);
-        if !self.smooth || t == 0 {
+        if t == 0 {
             return None;
         }
         let s = &self.tris[t as usize - 1];
@@ -276,14 +279,21 @@ impl Surfaces {
     /// samples within `tol` (a smooth surface finely tessellated, or one
     /// plane), or they meet between the samples on an edge both triangles
     /// reach (a crease, however steep either side is).
+    #[inline]
     pub fn outline(&self, a: (usize, usize), b: (usize, usize), tol: f64) -> bool {
         let (ta, tb) = (*self.tri.get(a.0, a.1), *self.tri.get(b.0, b.1));
-        if ta == 0 || tb == 0 {
-            return ta != tb;
-        }
         if ta == tb {
             return false;
         }
+        if ta == 0 || tb == 0 {
+            return true;
+        }
+        self.apart(ta, tb, a, b, tol)
+    }
+
+    /// `outline` for two different triangles.
+    #[inline(never)]
+    fn apart(&self, ta: u32, tb: u32, a: (usize, usize), b: (usize, usize), tol: f64) -> bool {
         let (sa, sb) = (&self.tris[ta as usize - 1], &self.tris[tb as usize - 1]);
         let (pa, pb) = (Self::centre(a.0, a.1), Self::centre(b.0, b.1));
         let d0 = sa.depth_at(pa) - sb.depth_at(pa);
