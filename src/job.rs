@@ -211,12 +211,7 @@ impl ReliefJob {
             alpha: p.alpha,
             threshold: p.silhouette,
         };
-        let is_png = self
-            .model
-            .as_ref()
-            .and_then(|m| m.extension())
-            .is_some_and(|e| e.eq_ignore_ascii_case("png"));
-        if is_png {
+        if self.model_is("png") {
             let path = self.model.as_ref().unwrap();
             let img = t.time("load", || load_png(path))?;
             let (w, h) = match &img {
@@ -260,16 +255,19 @@ impl ReliefJob {
 
     /// The model's up axis and whether it was chosen by its file type.
     pub fn up(&self) -> (Up, bool) {
-        let stl = self
-            .model
-            .as_ref()
-            .and_then(|m| m.extension())
-            .is_some_and(|e| e.eq_ignore_ascii_case("stl"));
         match self.up {
             Some(u) => (u, false),
-            None if stl => (Up::Z, true),
+            None if self.model_is("stl") => (Up::Z, true),
             None => (Up::Y, true),
         }
+    }
+
+    /// Whether the model file has this extension (any case).
+    pub fn model_is(&self, ext: &str) -> bool {
+        self.model
+            .as_ref()
+            .and_then(|m| m.extension())
+            .is_some_and(|e| e.eq_ignore_ascii_case(ext))
     }
 
     /// The camera with the up axis resolved.

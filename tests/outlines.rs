@@ -2,42 +2,22 @@
 //! every outline is a step of the requested height and no jump between
 //! neighbouring samples exceeds it plus one sample's slope.
 
+mod common;
+
+use common::{relief_params, shaped};
 use relievo::grid::Grid;
-use relievo::relief::gradient::{shape_field, Shaping};
-use relievo::relief::{build, Method, Params};
-use relievo::scene::{demo, render, Camera};
+use relievo::relief::build;
+use relievo::scene::{demo, Camera};
 use relievo::timing::Timings;
 
 fn relief(steps: Option<f64>, res: usize) -> (Grid<f32>, Grid<bool>) {
-    let mesh = demo::crossed_tubes(0.0);
     let cam = Camera {
         pitch: 20.0,
         ..Camera::default()
     };
-    let dm = render(&mesh, &cam, res, 2, (1 << 26, "allowed"), None).unwrap();
-    let field = shape_field(
-        &dm,
-        2,
-        Shaping {
-            alpha: 4.0,
-            threshold: 8.0,
-        },
-    );
+    let p = relief_params(steps);
+    let field = shaped(&demo::crossed_tubes(0.0), cam, res, &p, None);
     assert!(field.silhouette_edges > 100);
-    let p = Params {
-        depth_mm: 5.0,
-        width_mm: 100.0,
-        alpha: 4.0,
-        silhouette: 8.0,
-        steps_mm: steps,
-        flat_background: false,
-        bands: vec![],
-        mirror: false,
-        invert: false,
-        method: Method::Gradient,
-        fade: None,
-        tilt: None,
-    };
     let r = build(&field, &p, &[], &mut Timings::default()).unwrap();
     (r.heights, field.barrier)
 }

@@ -3,30 +3,14 @@
 
 mod common;
 
-use common::{ok, read_png16, run, scratch, shared_model};
+use common::{ok, read_png16, relief_params as params, run, scratch, shaped, shared_model};
 use relievo::grid::Grid;
-use relievo::relief::gradient::{shape_field, Field, Shaping};
-use relievo::relief::{build, Method, Params};
-use relievo::scene::{mesh, render, Camera, View};
+use relievo::relief::build;
+use relievo::relief::gradient::Field;
+use relievo::relief::{Method, Params};
+use relievo::scene::{mesh, Camera, View};
 use relievo::timing::Timings;
 use std::path::Path;
-
-fn params(steps: Option<f64>) -> Params {
-    Params {
-        depth_mm: 5.0,
-        width_mm: 100.0,
-        alpha: 4.0,
-        silhouette: 8.0,
-        steps_mm: steps,
-        flat_background: false,
-        bands: vec![],
-        mirror: false,
-        invert: false,
-        method: Method::Gradient,
-        fade: None,
-        tilt: None,
-    }
-}
 
 /// A relief of a shipped model and its field (ids, outline barriers).
 fn relief(model: &str, cam: Camera, res: usize, p: &Params) -> (Grid<f32>, Field, Vec<String>) {
@@ -41,15 +25,7 @@ fn relief_smooth(
     smooth: Option<f64>,
 ) -> (Grid<f32>, Field, Vec<String>) {
     let m = mesh::load(Path::new(&shared_model(model))).unwrap();
-    let dm = render(&m, &cam, res, 2, (1 << 26, "allowed"), smooth).unwrap();
-    let field = shape_field(
-        &dm,
-        2,
-        Shaping {
-            alpha: p.alpha,
-            threshold: p.silhouette,
-        },
-    );
+    let field = shaped(&m, cam, res, p, smooth);
     let r = build(&field, p, &[], &mut Timings::default()).unwrap();
     (r.heights, field, m.objects)
 }
@@ -409,12 +385,7 @@ fn steps_are_one_clean_step_per_outline() {
                 ..Camera::default()
             };
             let tubes = relievo::scene::demo::crossed_tubes(0.0);
-            let dm = render(&tubes, &cam, res, 2, (1 << 26, "allowed"), None).unwrap();
-            let shaping = Shaping {
-                alpha: p.alpha,
-                threshold: p.silhouette,
-            };
-            let f = shape_field(&dm, 2, shaping);
+            let f = shaped(&tubes, cam, res, &p, None);
             let r = build(&f, &p, &[], &mut Timings::default()).unwrap();
             (r.heights, f)
         } else {
@@ -502,17 +473,9 @@ fn the_relief_reads_like_the_scene_at_100_to_2() {
         } else {
             mesh::load(Path::new(&shared_model(model))).unwrap()
         };
-        let dm = render(&m, &cam, 256, 2, (1 << 26, "allowed"), None).unwrap();
         let mut p = params(None);
         p.depth_mm = 2.0;
-        let f = shape_field(
-            &dm,
-            2,
-            Shaping {
-                alpha: p.alpha,
-                threshold: p.silhouette,
-            },
-        );
+        let f = shaped(&m, cam, 256, &p, None);
         let grad = build(&f, &p, &[], &mut Timings::default()).unwrap();
         let mut lp = p.clone();
         lp.method = Method::Linear;

@@ -64,12 +64,7 @@ fn cutting_job(dir: &Path, n: usize) -> (PathBuf, Vec<String>) {
     }
     let p = dir.join("cut.nc");
     std::fs::write(&p, &text).unwrap();
-    let lines = text
-        .lines()
-        .map(relievo::gcode::parse::strip)
-        .filter(|l| !l.is_empty())
-        .collect();
-    (p, lines)
+    (p, common::grbl_lines(&text))
 }
 
 /// The stock after a program's moves, heights on a 0.1 mm grid.

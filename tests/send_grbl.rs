@@ -498,39 +498,17 @@ fn a_foreign_post_simulates_and_streams() {
                 G2 X30 Y20 I0 J10\nG1 X30 Y30\nG0 Z5\nM9\nM5\nM30\n%\n";
     std::fs::write(&path, text).unwrap();
     let relief = d.join("r.png");
-    ok(&run(&[
-        "relief",
-        "--resolution",
-        "64",
-        "--width",
-        "40",
-        "-q",
-        "-o",
-        relief.to_str().unwrap(),
-    ]));
-    let sim = run(&[
-        "simulate",
-        path.to_str().unwrap(),
-        "--relief",
-        relief.to_str().unwrap(),
-        "--tool",
-        "ball:3",
-        "--stock",
-        "40x40x10",
-        "-o",
-        d.join("cut.png").to_str().unwrap(),
-        "-q",
-    ]);
-    ok(&sim);
+    demo_relief(&relief, "64");
+    simulate_report(
+        &path,
+        &relief,
+        &d.join("cut.png"),
+        &["--tool", "ball:3", "--stock", "60x40x10"],
+    );
     let mut p = port(Faults::default());
     job(&path).run(&mut p, &AtomicBool::new(false)).unwrap();
     finish(&mut p);
-    let want: Vec<String> = text
-        .lines()
-        .map(relievo::gcode::parse::strip)
-        .filter(|l| !l.is_empty() && l != "%")
-        .collect();
-    assert_eq!(p.sim.log, want);
+    assert_eq!(p.sim.log, grbl_lines(text));
     assert!(p.sim.errors.is_empty(), "{:?}", p.sim.errors);
     std::fs::remove_dir_all(d).unwrap();
 }
@@ -553,11 +531,7 @@ fn an_m0_pause_holds_and_continues() {
         }
     }
     std::fs::write(&path, &with_pause).unwrap();
-    let want: Vec<String> = with_pause
-        .lines()
-        .map(relievo::gcode::parse::strip)
-        .filter(|l| !l.is_empty())
-        .collect();
+    let want = grbl_lines(&with_pause);
     let mut p = port(Faults::default());
     let go = SendJob {
         on_pause: sender::OnPause::Continue,

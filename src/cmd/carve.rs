@@ -35,10 +35,7 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     );
     relievo::output::check_writable(&args.output)?;
     let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
-    super::relief::say_up(&rjob, quiet);
-    for w in &r.warnings {
-        eprintln!("warning: {w}");
-    }
+    super::relief::say_notes(&rjob, &r.warnings, quiet);
     // all or nothing, also when interrupted: no relief without its job
     for p in &r.written {
         relievo::output::interrupt::remove_on_interrupt(p);

@@ -112,17 +112,17 @@ pub struct ReliefOpts {
     pub depth_out: Option<PathBuf>,
 }
 
-/// Print the up axis a mesh is read with when its file type chose it, so
-/// that a model lying on its back is explained.
-pub fn say_up(job: &ReliefJob, quiet: bool) {
-    let mesh = job
-        .model
-        .as_ref()
-        .and_then(|m| m.extension())
-        .is_some_and(|e| !e.eq_ignore_ascii_case("png"));
+/// After a relief is made: the up axis a mesh was read with when its file
+/// type chose it (so that a model lying on its back is explained), and the
+/// relief's warnings.
+pub fn say_notes(job: &ReliefJob, warnings: &[String], quiet: bool) {
+    let mesh = job.model.is_some() && !job.model_is("png");
     if let (false, (up, true), true) = (quiet, job.up(), mesh) {
         let kind = if up == Up::Z { "STL" } else { "OBJ" };
         eprintln!("up axis: {} ({kind} default; --up to change)", up.name());
+    }
+    for w in warnings {
+        eprintln!("warning: {w}");
     }
 }
 
@@ -191,10 +191,7 @@ pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> 
         pb.finish_and_clear();
     }
     let s = res?;
-    say_up(&job, quiet);
-    for w in &s.warnings {
-        eprintln!("warning: {w}");
-    }
+    say_notes(&job, &s.warnings, quiet);
     if !quiet {
         let r = &s.relief;
         eprintln!(

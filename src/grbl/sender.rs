@@ -400,13 +400,8 @@ pub fn clock(lines: &[JobLine], text: &str, settings: &[String]) -> Option<Vec<f
 /// Steps per mm from GRBL's `$$` listing, as the shortest move sure to
 /// take a planner block.
 pub fn min_move(settings: &[String]) -> Option<f64> {
-    let steps: Vec<f64> = ["$100=", "$101=", "$102="]
-        .iter()
-        .map(|k| {
-            settings
-                .iter()
-                .find_map(|l| l.strip_prefix(k)?.trim().parse::<f64>().ok())
-        })
+    let steps: Vec<f64> = (100..=102)
+        .map(|n| setting(settings, n))
         .collect::<Option<_>>()?;
     // GRBL rounds each target to whole steps, so a move of a whole step
     // or more (along one axis) changes the rounded position however the

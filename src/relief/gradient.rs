@@ -52,9 +52,15 @@ pub trait Source: Sync {
     /// The slopes of the edges to (x + 1, y) and (x, y + 1) and whether
     /// each is an outline. Without geometry: a slope above the threshold.
     fn edges(&self, x: usize, y: usize, threshold: f32) -> RawEdge {
-        let g = self.slope(x, y);
-        (g, (g.0.abs() > threshold, g.1.abs() > threshold))
+        above(self.slope(x, y), threshold)
     }
+}
+
+/// Slopes and which of them exceed the threshold: outlines where no
+/// geometry is known.
+#[inline]
+fn above(g: (f32, f32), threshold: f32) -> RawEdge {
+    (g, (g.0.abs() > threshold, g.1.abs() > threshold))
 }
 
 impl Source for DepthMap {
@@ -91,7 +97,7 @@ impl Source for DepthMap {
     fn edges(&self, x: usize, y: usize, threshold: f32) -> RawEdge {
         let mut g = self.slope(x, y);
         let Some(s) = &self.surfaces else {
-            return (g, (g.0.abs() > threshold, g.1.abs() > threshold));
+            return above(g, threshold);
         };
         let n = self.h.w.max(self.h.h) as f64;
         let tol = threshold as f64 / n;

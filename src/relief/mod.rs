@@ -82,9 +82,8 @@ fn extent(v: impl ParallelIterator<Item = f64>) -> (f64, f64) {
 /// neighbours in `mask`) by what its lowest sample lies below the field
 /// (0), so that no part of it sinks into the background. The integrated
 /// slopes may run downhill from an outline (an ear behind a head); the
-/// part then stands on a step that height all round. Returns the largest
-/// lift.
-fn lift_above_field(h: &mut Grid<f64>, mask: &Grid<bool>) -> f64 {
+/// part then stands on a step that height all round.
+fn lift_above_field(h: &mut Grid<f64>, mask: &Grid<bool>) {
     let (w, n) = (h.w, h.data.len());
     let mut part = vec![u32::MAX; n];
     let mut lows = Vec::new();
@@ -129,7 +128,6 @@ fn lift_above_field(h: &mut Grid<f64>, mask: &Grid<bool>) -> f64 {
                 *v += lows[k as usize];
             }
         });
-    lows.into_iter().fold(0.0, f64::max)
 }
 
 /// Spread of a step across its outline (output samples): the standard
@@ -329,6 +327,12 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
             if p.flat_background && field.mask.data.iter().all(|&m| m) {
                 bail!("--flat-background: the input has no background pixels to hold at 0");
             }
+            // with a flat background, no part of the subject below it
+            let lift = |h: &mut Grid<f64>| {
+                if p.flat_background {
+                    lift_above_field(h, &field.mask);
+                }
+            };
             let solve = |gx: &Grid<f32>, gy: &Grid<f32>| {
                 let div = poisson::divergence(gx, gy, 1.0 / n as f64);
                 if p.flat_background {
@@ -354,9 +358,7 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                         bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");
                     }
                     let mut main = t.time("poisson", || solve(&gx, &gy));
-                    if p.flat_background {
-                        lift_above_field(&mut main, &field.mask);
-                    }
+                    lift(&mut main);
                     // choose c so a unit step (1 / n_fine of h) becomes s mm
                     // after the final scaling to depth
                     let mut c = s * nf * range(&main, &steps, 0.0) / subject;
@@ -378,16 +380,12 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                         .par_iter_mut()
                         .zip(steps.data.par_iter())
                         .for_each(|(a, b)| *a += c * b);
-                    if p.flat_background {
-                        lift_above_field(&mut total, &field.mask);
-                    }
+                    lift(&mut total);
                     to_mm(&total, subject)
                 }
                 _ => {
                     let mut h = t.time("poisson", || solve(&gx, &gy));
-                    if p.flat_background {
-                        lift_above_field(&mut h, &field.mask);
-                    }
+                    lift(&mut h);
                     to_mm(&h, subject)
                 }
             }

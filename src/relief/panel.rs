@@ -86,47 +86,40 @@ fn along(w: usize, h: usize, toward_deg: f64) -> impl Fn(usize, usize) -> f64 + 
         (0.0, h as f64),
         (w as f64, h as f64),
     ];
-    let lo = corners
+    let (lo, hi) = corners
         .iter()
         .map(|&(x, y)| at(x, y))
-        .fold(f64::MAX, f64::min);
-    let hi = corners
-        .iter()
-        .map(|&(x, y)| at(x, y))
-        .fold(f64::MIN, f64::max);
+        .fold((f64::MAX, f64::MIN), |(l, h), v| (l.min(v), h.max(v)));
     let span = (hi - lo).max(1e-12);
     move |x, y| (at(x as f64 + 0.5, (h - y) as f64 - 0.5) - lo) / span
 }
 
-/// Multiply heights (mm above 0) by the fade.
-pub fn fade(heights: &mut Grid<f32>, f: &Fade) {
-    let (w, h) = (heights.w, heights.h);
-    let pos = along(w, h, f.toward_deg);
+/// Change every height by `f(height, position along toward_deg)`.
+fn along_each(heights: &mut Grid<f32>, toward_deg: f64, f: impl Fn(f32, f64) -> f32 + Sync) {
+    let w = heights.w;
+    let pos = along(w, heights.h, toward_deg);
     heights
         .data
         .par_chunks_mut(w)
         .enumerate()
         .for_each(|(y, row)| {
             for (x, v) in row.iter_mut().enumerate() {
-                *v *= (1.0 - f.amount * pos(x, y)) as f32;
+                *v = f(*v, pos(x, y));
             }
         });
 }
 
+/// Multiply heights (mm above 0) by the fade.
+pub fn fade(heights: &mut Grid<f32>, f: &Fade) {
+    along_each(heights, f.toward_deg, |v, s| {
+        v * (1.0 - f.amount * s) as f32
+    });
+}
+
 /// Add the tilt's plane (0 at the low side, `rise` at the high side).
 pub fn tilt(heights: &mut Grid<f32>, t: &Tilt, w_mm: f64, h_mm: f64) {
-    let (w, h) = (heights.w, heights.h);
-    let pos = along(w, h, t.toward_deg);
     let rise = t.rise(w_mm, h_mm);
-    heights
-        .data
-        .par_chunks_mut(w)
-        .enumerate()
-        .for_each(|(y, row)| {
-            for (x, v) in row.iter_mut().enumerate() {
-                *v += (rise * pos(x, y)) as f32;
-            }
-        });
+    along_each(heights, t.toward_deg, |v, s| v + (rise * s) as f32);
 }
 
 #[cfg(test)]

@@ -84,15 +84,11 @@ impl Up {
         DVec3::new(x.dot(f), y.dot(f), z.dot(f))
     }
 
-    pub fn name(self) -> &'static str {
-        match self {
-            Up::Y => "y",
-            Up::Z => "z",
-            Up::NegY => "-y",
-            Up::NegZ => "-z",
-            Up::X => "x",
-            Up::NegX => "-x",
-        }
+    /// The name `--up` takes.
+    pub fn name(self) -> String {
+        use clap::ValueEnum;
+        self.to_possible_value()
+            .map_or_else(String::new, |v| v.get_name().to_string())
     }
 }
 
@@ -317,7 +313,8 @@ impl Frame {
     /// with normal `n`, as the image sees it; `None` where the plane is
     /// seen edge-on or from behind.
     pub fn plane_slope(&self, p: DVec3, n: DVec3) -> Option<[f64; 2]> {
-        if self.flat || n.dot(self.to_eye(p)) <= 1e-6 * n.length() * self.to_eye(p).length() {
+        let eye = self.to_eye(p);
+        if self.flat || n.dot(eye) <= 1e-6 * n.length() * eye.length() {
             return None;
         }
         let n = n.normalize();

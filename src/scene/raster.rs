@@ -99,11 +99,7 @@ fn setup(p: [[f64; 3]; 3], id: u16, corner: CornerSlopes, w: usize, h: usize) ->
         return None;
     }
     // h is affine in the edge values, which are affine in (x, y)
-    let edge = |k: usize, p: [f64; 2]| {
-        let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
-        (b[0] - a[0]) as f64 * (p[1] - a[1] as f64) - (b[1] - a[1]) as f64 * (p[0] - a[0] as f64)
-    };
-    let at = |p: [f64; 2]| (0..3).map(|k| edge(k, p) * hh[k]).sum::<f64>() / area as f64;
+    let at = |p: [f64; 2]| (0..3).map(|k| edge_value(&v, k, p) * hh[k]).sum::<f64>() / area as f64;
     let c = at([0.0, 0.0]);
     let plane = [at([1.0, 0.0]) - c, at([0.0, 1.0]) - c, c];
     Some(Setup {
@@ -216,14 +212,21 @@ pub fn rasterize(
     (depth, idg, surfaces)
 }
 
+/// Edge k's function (edge k is opposite vertex k) at a point in fixed
+/// point, in floating point: positive inside, as `scan` evaluates it.
+#[inline]
+fn edge_value(v: &[[i64; 2]; 3], k: usize, p: [f64; 2]) -> f64 {
+    let (a, b) = (v[(k + 1) % 3], v[(k + 2) % 3]);
+    (b[0] - a[0]) as f64 * (p[1] - a[1] as f64) - (b[1] - a[1]) as f64 * (p[0] - a[0] as f64)
+}
+
 impl Setup {
     /// Signed distance of a point (fixed point) from each edge line,
     /// positive inside; edge k is opposite vertex k.
     fn distances(&self, p: [f64; 2]) -> [f64; 3] {
         [0, 1, 2].map(|k| {
             let (a, b) = (self.v[(k + 1) % 3], self.v[(k + 2) % 3]);
-            let (dx, dy) = ((b[0] - a[0]) as f64, (b[1] - a[1]) as f64);
-            (dx * (p[1] - a[1] as f64) - dy * (p[0] - a[0] as f64)) / dx.hypot(dy)
+            edge_value(&self.v, k, p) / ((b[0] - a[0]) as f64).hypot((b[1] - a[1]) as f64)
         })
     }
 
@@ -263,10 +266,7 @@ impl Surfaces {
         let p = Self::centre(x, y);
         let mut g = [0.0; 2];
         for (k, c) in s.corner.iter().enumerate() {
-            let (a, b) = (s.v[(k + 1) % 3], s.v[(k + 2) % 3]);
-            let e = (b[0] - a[0]) as f64 * (p[1] - a[1] as f64)
-                - (b[1] - a[1]) as f64 * (p[0] - a[0] as f64);
-            let l = e / s.area as f64;
+            let l = edge_value(&s.v, k, p) / s.area as f64;
             g[0] += l * c[0] as f64;
             g[1] += l * c[1] as f64;
         }

@@ -135,3 +135,49 @@ pub fn judged_gouge(dir: &Path, job: &Path) -> f64 {
     );
     report["max_gouge_mm"].as_f64().unwrap()
 }
+
+/// The relief parameters the library-level tests start from: 100 mm wide,
+/// 5 mm deep, alpha 4, silhouette 8, free background.
+pub fn relief_params(steps: Option<f64>) -> relievo::relief::Params {
+    relievo::relief::Params {
+        depth_mm: 5.0,
+        width_mm: 100.0,
+        alpha: 4.0,
+        silhouette: 8.0,
+        steps_mm: steps,
+        flat_background: false,
+        bands: vec![],
+        mirror: false,
+        invert: false,
+        method: relievo::relief::Method::Gradient,
+        fade: None,
+        tilt: None,
+    }
+}
+
+/// `mesh` rendered at `res` px (meshes render at twice that) and shaped
+/// with `p`'s compression and silhouette threshold.
+pub fn shaped(
+    mesh: &relievo::scene::Mesh,
+    cam: relievo::scene::Camera,
+    res: usize,
+    p: &relievo::relief::Params,
+    smooth: Option<f64>,
+) -> relievo::relief::gradient::Field {
+    let dm = relievo::scene::render(mesh, &cam, res, 2, (1 << 26, "allowed"), smooth).unwrap();
+    let shaping = relievo::relief::gradient::Shaping {
+        alpha: p.alpha,
+        threshold: p.silhouette,
+    };
+    relievo::relief::gradient::shape_field(&dm, 2, shaping)
+}
+
+/// What GRBL's line buffer holds for each line of a job's text (comments
+/// and spaces stripped), blank lines and '%' marks left out: what the
+/// simulated machine's log lists when every line ran once, in order.
+pub fn grbl_lines(text: &str) -> Vec<String> {
+    text.lines()
+        .map(relievo::gcode::parse::strip)
+        .filter(|l| !l.is_empty() && l != "%")
+        .collect()
+}
