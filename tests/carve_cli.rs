@@ -143,7 +143,7 @@ fn check(name: &str, model: Option<&str>, res: &str, finish: &str) -> Residual {
     for l in text.lines() {
         let s = relievo::gcode::parse::strip(l);
         assert!(
-            s.chars().all(|c| "GMXYZFSPN0123456789.-".contains(c)),
+            s.chars().all(|c| "GMXYZIJKFSPN0123456789.-".contains(c)),
             "unexpected word in '{l}'"
         );
     }

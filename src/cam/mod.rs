@@ -14,6 +14,7 @@ use crate::tool::Tool;
 use crate::toolpath::dropcutter::HeightField;
 use crate::toolpath::{path, raster, rough, waterline, Pass};
 use glam::DVec3;
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 mod boundary;
@@ -159,6 +160,8 @@ pub struct ToolpathJob {
     pub angle: f64,
     /// Merge tolerance, mm.
     pub tolerance: f64,
+    /// Arcs (G2/G3) where runs of points fit a circle.
+    pub arcs: bool,
     /// Cutting feed, mm/min; `None` = the material's, else 1000; within
     /// the machine's XY limit.
     pub feed: Option<f64>,
@@ -583,11 +586,12 @@ impl ToolpathJob {
             };
             // each level contours the whole CL grid
             let levels = (relief.depth_mm / dz).ceil();
-            let grid = (relief.heights.w * relief.heights.h) as f64;
+            let k = waterline::node_pitch(&hf, &tool) / hf.pitch;
+            let grid = (relief.heights.w * relief.heights.h) as f64 / (k * k);
             if levels * grid > 10.0 * MAX_CL_POINTS {
                 bail!(
                     "--stepover {step:.4e} mm: {levels:.0} waterline levels over {grid:.0} \
-                     samples, more than allowed; raise --stepover"
+                     grid nodes, more than allowed; raise --stepover"
                 );
             }
             let loops = t.time("waterline", || {
@@ -1143,14 +1147,14 @@ impl ToolpathJob {
             let cl = raster::drop_rows(hf, tool, &g, floor);
             raw += cl.iter().map(Vec::len).sum::<usize>();
             let main = match (self.direction, whole) {
-                (None, true) => vec![raster::zigzag(hf, tool, &cl, floor, tol)],
-                (None, false) => cl.iter().map(|c| path::merge(c, tol)).collect(),
-                (Some(_), _) => raster::one_way(&cl, climb, tol),
+                (None, true) => vec![raster::zigzag(hf, tool, &cl, floor, tol, self.arcs)],
+                (None, false) => cl.iter().map(|c| raster::thin(c, tol, self.arcs)).collect(),
+                (Some(_), _) => raster::one_way(&cl, climb, tol, self.arcs),
             };
-            out.extend(
-                main.iter()
-                    .map(|c| path::check_and_refine(hf, tool, c, floor, tol)),
-            );
+            for c in &main {
+                let d = path::check_and_refine(hf, tool, c, floor, tol);
+                out.push(d);
+            }
         }
         (out, raw)
     }
@@ -1265,14 +1269,15 @@ impl ToolpathJob {
                     && (!steep_only || slope >= waterline::GENTLEST)
                     && keep_also.is_none_or(|f| f(p.x, p.y))
             };
-            let cs: Vec<waterline::Contour> = waterline::contours(&g, hf, tool, level)
+            let cs: Vec<waterline::Contour> = waterline::contours(&g, level)
                 .iter()
                 .flat_map(|c| waterline::parts(c, keep))
                 .collect();
             let mut loops: Vec<(bool, Vec<DVec3>)> = cs
-                .iter()
+                .par_iter()
                 .map(|c| {
-                    let c = waterline::refine(hf, tool, floor, c);
+                    let c = waterline::place(hf, tool, floor, c);
+                    let c = waterline::refine(hf, tool, floor, &c);
                     let mut pts = waterline::simplify(&c, self.tolerance);
                     if climb {
                         pts.reverse();
@@ -1389,6 +1394,7 @@ impl ToolpathJob {
         top.extend(header(&ops[0]));
         let inch = self.units == Units::In;
         let mut e = Emitter::new(&top, &ops[0].settings, inch, z_shift);
+        e.arcs = self.arcs;
         let shift = plan.shift;
         for (k, op) in ops.iter().enumerate() {
             if k > 0 && op.tool != ops[k - 1].tool {
@@ -1399,17 +1405,10 @@ impl ToolpathJob {
                 }
             }
             for pass in &op.passes {
-                // on the G-code grid: XY as dropped, Z rounded up
                 let pts: Vec<DVec3> = pass
                     .pts
                     .iter()
-                    .map(|p| {
-                        DVec3::new(
-                            path::snap(p.x + shift.x),
-                            path::snap(p.y + shift.y),
-                            path::snap_up(p.z),
-                        )
-                    })
+                    .map(|p| DVec3::new(p.x + shift.x, p.y + shift.y, p.z))
                     .collect();
                 e.pass(&pts, &op.settings, pass.clear_z);
             }

@@ -76,6 +76,12 @@ pub struct CutOpts {
     /// Merge collinear points within this distance, mm.
     #[arg(long, default_value_t = 0.005)]
     pub tolerance: f64,
+    /// Arcs: raster rows along X or Y as G2/G3 in their vertical plane
+    /// (G18/G19) where a circle fits within the tolerance, as the very
+    /// chords GRBL cuts them into with its default $12 arc tolerance
+    /// (0.002 mm).
+    #[arg(long, value_enum, default_value_t = OnOff::On)]
+    pub arcs: OnOff,
     /// Cutting feed, mm/min [default: the material's, else 1000; within the machine's limit].
     #[arg(long)]
     pub feed: Option<f64>,
@@ -182,6 +188,7 @@ impl CutOpts {
             stepover: self.scallop.map(Stepover::Scallop).or(self.stepover),
             angle: self.angle,
             tolerance: self.tolerance,
+            arcs: self.arcs == OnOff::On,
             feed: self.feed,
             plunge_feed: self.plunge_feed,
             rpm: self.rpm,
@@ -267,4 +274,11 @@ pub fn run(args: ToolpathArgs, quiet: bool, verbose: bool) -> relievo::Result<()
     let s = with_spinner(quiet, &what, || job.run(&relief))?;
     report(&s, quiet, verbose);
     Ok(())
+}
+
+/// A switch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum OnOff {
+    On,
+    Off,
 }

@@ -3,6 +3,7 @@
 //! decimals (5 in inches: a 0.25 um grid), every line at most 79
 //! characters. Heights are rounded up, never into the material.
 
+use super::arc::{self, Arc, Plane};
 use glam::DVec3;
 use std::fmt::Write;
 
@@ -84,6 +85,10 @@ pub struct Emitter {
     inch: bool,
     /// Added to every Z (the stock's thickness when Z0 is its bottom).
     z_shift: f64,
+    /// Write runs of GRBL arc chords as G2/G3 (`arc_run`).
+    pub arcs: bool,
+    /// The arc plane last written.
+    plane: Plane,
 }
 
 impl Emitter {
@@ -96,6 +101,8 @@ impl Emitter {
             feed: None,
             inch,
             z_shift,
+            arcs: false,
+            plane: Plane::Xy,
         };
         for h in header {
             comment(&mut e.out, h);
@@ -144,7 +151,6 @@ impl Emitter {
         let g = if rapid { 0 } else { 1 };
         if self.motion != Some(g) {
             write!(l, "G{g}").unwrap();
-            self.motion = Some(g);
         }
         let prev = self.pos;
         for (k, axis) in ['X', 'Y', 'Z'].into_iter().enumerate() {
@@ -159,6 +165,7 @@ impl Emitter {
         if l.is_empty() || l == "G0" || l == "G1" {
             return; // no motion at this resolution
         }
+        self.motion = Some(g);
         if !rapid && self.feed != Some(feed) {
             let f = if self.inch {
                 num_dec(feed / 25.4, 2)
@@ -174,8 +181,13 @@ impl Emitter {
 
     /// Cut one continuous pass: rise to `clear_z` (a height known to
     /// clear the material) if lower, travel there, plunge, cut.
+    /// The points go on the G-code grid (XY rounded, Z rounded up); runs
+    /// of exact GRBL arc chords among them become G2/G3 when `arcs`.
     pub fn pass(&mut self, pts: &[DVec3], s: &Settings, clear_z: f64) {
+        use crate::toolpath::path::{snap, snap_up};
+        let grid = |p: DVec3| DVec3::new(snap(p.x), snap(p.y), snap_up(p.z));
         let Some(&first) = pts.first() else { return };
+        let first = grid(first);
         let z = match self.pos {
             None => {
                 let z = clear_z.max(s.safe_z);
@@ -196,9 +208,92 @@ impl Emitter {
             self.go(DVec3::new(first.x, first.y, clear_z), true, 0.0);
         }
         self.go(first, false, s.plunge_feed);
-        for &p in &pts[1..] {
-            self.go(p, false, s.feed);
+        let mut i = 0;
+        while i + 1 < pts.len() {
+            if self.arcs {
+                if let Some((j, a)) = arc_run(pts, i, arc::GRBL_ARC_TOLERANCE) {
+                    if self.arc(a, grid(pts[j]), j - i, s.feed) {
+                        i = j;
+                        continue;
+                    }
+                }
+            }
+            i += 1;
+            self.go(grid(pts[i]), false, s.feed);
         }
+    }
+
+    /// The value GRBL reads back from `coord(v, axis)`, in mm.
+    fn written(&self, v: f64, axis: usize) -> f64 {
+        let w: f64 = self.coord(v, axis).parse().unwrap_or(f64::NAN);
+        if self.inch {
+            w * 25.4
+        } else {
+            w
+        }
+    }
+
+    /// Write the arc `a` from the current position to `to` as one G2/G3,
+    /// if GRBL, reading the rounded numbers, cuts it into the same
+    /// `chords` chords the pass was checked with; else write nothing.
+    fn arc(&mut self, a: Arc, to: DVec3, chords: usize, feed: f64) -> bool {
+        let Some(from) = self.pos else { return false };
+        let (a0, a1, _) = a.plane.axes();
+        let start = DVec3::from_array([0, 1, 2].map(|k| self.written(from[k], k)));
+        let end = DVec3::from_array([0, 1, 2].map(|k| self.written(to[k], k)));
+        // the centre as offsets from where the machine is (Z offsets are
+        // not shifted with the heights)
+        let scale = if self.inch { 25.4 } else { 1.0 };
+        let off = |c: f64, s: f64, k: usize| {
+            let raw = if k == 2 { c + self.z_shift - s } else { c - s };
+            let w: f64 = num_dec(raw / scale, if self.inch { 5 } else { 4 })
+                .parse()
+                .unwrap_or(f64::NAN);
+            w * scale
+        };
+        let mut ijk = [None; 3];
+        ijk[a0] = Some(off(a.centre.0, start[a0], a0));
+        ijk[a1] = Some(off(a.centre.1, start[a1], a1));
+        let read = arc::setup(a.plane, a.clockwise, start, end, ijk, None, true);
+        let Ok(b) = read else { return false };
+        if b.chords(b.travel(start, end), arc::GRBL_ARC_TOLERANCE) != chords {
+            return false;
+        }
+        let mut l = String::new();
+        if self.plane != a.plane {
+            write!(l, "G{} ", a.plane.code()).unwrap();
+            self.plane = a.plane;
+        }
+        write!(l, "G{}", if a.clockwise { 2 } else { 3 }).unwrap();
+        self.motion = Some(if a.clockwise { 2 } else { 3 });
+        for (k, axis) in ['X', 'Y', 'Z'].into_iter().enumerate() {
+            let v = self.coord(to[k], k);
+            if self.coord(from[k], k) != v {
+                write!(l, " {axis}{v}").unwrap();
+            }
+        }
+        for k in [a0, a1] {
+            let v = ijk[k].unwrap() / scale;
+            write!(
+                l,
+                " {}{}",
+                ['I', 'J', 'K'][k],
+                num_dec(v, if self.inch { 5 } else { 4 })
+            )
+            .unwrap();
+        }
+        if self.feed != Some(feed) {
+            let f = if self.inch {
+                num_dec(feed / 25.4, 2)
+            } else {
+                num(feed.round())
+            };
+            write!(l, " F{f}").unwrap();
+            self.feed = Some(feed);
+        }
+        self.pos = Some(to);
+        self.line(l);
+        true
     }
 
     /// Up to safe Z.
@@ -241,6 +336,74 @@ impl Emitter {
         self.line("M30".into());
         self.out
     }
+}
+
+/// The longest run of `pts` from `i` that is exactly the chords GRBL cuts
+/// one arc into (at least two chords, in one plane, equal angles, ends on
+/// the circle): its last index and the arc.
+pub fn arc_run(pts: &[DVec3], i: usize, tol: f64) -> Option<(usize, Arc)> {
+    const EPS: f64 = 1e-9;
+    if i + 2 >= pts.len() {
+        return None;
+    }
+    let (p0, p1, p2) = (pts[i], pts[i + 1], pts[i + 2]);
+    let plane = if p0.y == p1.y && p1.y == p2.y {
+        Plane::Zx
+    } else if p0.x == p1.x && p1.x == p2.x {
+        Plane::Yz
+    } else if p0.z == p1.z && p1.z == p2.z {
+        Plane::Xy
+    } else {
+        return None;
+    };
+    let (a0, a1, lin) = plane.axes();
+    let q = |p: DVec3| (p[a0], p[a1]);
+    let ((x0, y0), (x1, y1), (x2, y2)) = (q(p0), q(p1), q(p2));
+    // circumcentre of the first three
+    let d = 2.0 * (x0 * (y1 - y2) + x1 * (y2 - y0) + x2 * (y0 - y1));
+    if d.abs() < 1e-12 {
+        return None;
+    }
+    let s0 = x0 * x0 + y0 * y0;
+    let s1 = x1 * x1 + y1 * y1;
+    let s2 = x2 * x2 + y2 * y2;
+    let cx = (s0 * (y1 - y2) + s1 * (y2 - y0) + s2 * (y0 - y1)) / d;
+    let cy = (s0 * (x2 - x1) + s1 * (x0 - x2) + s2 * (x1 - x0)) / d;
+    let r = (x0 - cx).hypot(y0 - cy);
+    if r > crate::toolpath::arcs::MAX_RADIUS {
+        return None;
+    }
+    let chord = (x1 - x0).hypot(y1 - y0);
+    let turn = |a: (f64, f64), b: (f64, f64)| (a.0 - cx) * (b.1 - cy) - (a.1 - cy) * (b.0 - cx);
+    let cw = turn((x0, y0), (x1, y1)) < 0.0;
+    let mut j = i + 1;
+    while j + 1 < pts.len() {
+        let (a, b) = (pts[j], pts[j + 1]);
+        let (pa, pb) = (q(a), q(b));
+        let same = b[lin] == p0[lin]
+            && ((pb.0 - cx).hypot(pb.1 - cy) - r).abs() < EPS
+            && ((pb.0 - pa.0).hypot(pb.1 - pa.1) - chord).abs() < EPS
+            && (turn(pa, pb) < 0.0) == cw;
+        if !same {
+            break;
+        }
+        j += 1;
+    }
+    let arc = Arc {
+        plane,
+        clockwise: cw,
+        centre: (cx, cy),
+        radius: r,
+    };
+    // GRBL's count for the arc to j; a run of two arcs on one circle
+    // is cut at the first's end
+    while j >= i + 2 {
+        if arc.chords(arc.travel(p0, pts[j]), tol) == j - i {
+            return Some((j, arc));
+        }
+        j -= 1;
+    }
+    None
 }
 
 #[cfg(test)]
@@ -314,5 +477,51 @@ mod inch_tests {
             .find(|s| s.kind == crate::gcode::Kind::Feed)
             .unwrap();
         assert!((last_cut.b.z - -1.0).abs() < 2.6e-4 && last_cut.b.z >= -1.0);
+    }
+}
+
+#[cfg(test)]
+mod arc_tests {
+    use super::*;
+
+    /// A fitted row written with arcs reads back as the very chords the
+    /// fit checked.
+    #[test]
+    fn arcs_read_back_as_the_checked_chords() {
+        let s = Settings {
+            feed: 1000.0,
+            plunge_feed: 300.0,
+            rpm: 18000.0,
+            safe_z: 5.0,
+            dwell: 0.0,
+        };
+        for (y, rev) in [(3.0, false), (3.3, true)] {
+            let mut pts: Vec<DVec3> = (0..=400)
+                .map(|i| {
+                    let x = i as f64 * 0.05;
+                    DVec3::new(x, y, -2.0 + 0.8 * (x * 0.4).sin() + 0.3 * (x * 0.9).cos())
+                })
+                .collect();
+            if rev {
+                pts.reverse();
+            }
+            let fitted = crate::toolpath::arcs::fit(&pts, 0.005);
+            let mut e = Emitter::new(&[], &s, false, 0.0);
+            e.arcs = true;
+            e.pass(&fitted, &s, 5.0);
+            let g = e.finish(&s);
+            assert!(g.contains("G18"), "{g}");
+            let p = crate::gcode::program(&g).unwrap();
+            let cut: Vec<DVec3> = p
+                .segments
+                .iter()
+                .filter(|s| s.kind == crate::gcode::Kind::Feed)
+                .map(|s| s.b)
+                .collect();
+            assert_eq!(cut.len(), fitted.len(), "one chord per fitted point");
+            for (a, b) in cut.iter().zip(&fitted) {
+                assert!((*a - *b).length() < 3e-4, "{a} vs {b}");
+            }
+        }
     }
 }

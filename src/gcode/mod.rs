@@ -1,7 +1,8 @@
 //! G-code in the GRBL 1.1 dialect: the parser shared by the simulator and
 //! the sender, and the modal interpreter that turns a program into straight
-//! tool moves (arcs become chords within 0.1 micrometre).
+//! tool moves (arcs become the chords GRBL cuts them into, `arc`).
 
+pub mod arc;
 pub mod emit;
 pub mod modal;
 pub mod parse;
@@ -77,12 +78,8 @@ impl Program {
     }
 }
 
-/// Largest arc radius taken, mm: beyond any machine's travel, and it
-/// bounds the chords an arc takes (a full circle: about 22,000).
+/// Largest arc radius taken, mm: beyond any machine's travel.
 pub const MAX_ARC_RADIUS: f64 = 10_000.0;
-
-/// Largest chord error when arcs are broken into straight moves (mm).
-pub const ARC_TOLERANCE: f64 = 1e-4;
 
 /// Most straight moves a program may come to (arcs counted in chords):
 /// about 2.4 GB as segments, and as many again as the simulator's
@@ -112,8 +109,8 @@ pub fn program(text: &str) -> Result<Program> {
         let l = &parse::parse_line(l, k + 1)?;
         if p.segments.len() > MAX_SEGMENTS {
             bail!(
-                "line {}: the job comes to more than {} million moves (arcs in chords of \
-                 {ARC_TOLERANCE} mm), more than is taken",
+                "line {}: the job comes to more than {} million moves (arcs in GRBL's \
+                 chords), more than is taken",
                 l.number,
                 MAX_SEGMENTS / 1_000_000
             );
@@ -154,81 +151,25 @@ pub fn program(text: &str) -> Result<Program> {
             });
             *stop_before = false;
         };
-        if motion >= 2 {
-            let [i, j, r] = step.ijr;
-            for (a, b) in arc(pos, target, motion == 2, i, j, r, n)? {
-                push(a, b, &mut stop);
+        match step.arc {
+            Some(a) => {
+                if a.radius > MAX_ARC_RADIUS {
+                    bail!(
+                        "line {n}: arc radius {:.1} mm is larger than {MAX_ARC_RADIUS} mm",
+                        a.radius
+                    );
+                }
+                let mut from = pos;
+                for q in a.points(pos, target, arc::GRBL_ARC_TOLERANCE) {
+                    push(from, q, &mut stop);
+                    from = q;
+                }
             }
-        } else if target != pos {
-            push(pos, target, &mut stop);
+            None if target != pos => push(pos, target, &mut stop),
+            None => {}
         }
     }
     Ok(p)
-}
-
-/// Chords of an XY arc (helical in Z), clockwise for G2.
-fn arc(
-    a: DVec3,
-    b: DVec3,
-    cw: bool,
-    i: Option<f64>,
-    j: Option<f64>,
-    r: Option<f64>,
-    n: usize,
-) -> Result<Vec<(DVec3, DVec3)>> {
-    let (dx, dy) = (b.x - a.x, b.y - a.y);
-    let centre = match (i, j, r) {
-        (_, _, Some(r)) if i.is_none() && j.is_none() => {
-            // GRBL: positive R = the short arc, negative = the long one
-            let d = (dx * dx + dy * dy).sqrt();
-            if d == 0.0 {
-                bail!("line {n}: R arc with the same start and end point");
-            }
-            let h2 = r * r - d * d / 4.0;
-            if h2 < -(0.005f64.powi(2)) - 1e-9 {
-                bail!(
-                    "line {n}: arc radius R{r} is smaller than half the distance to the end point"
-                );
-            }
-            let h = h2.max(0.0).sqrt();
-            // centre lies to the right of a->b for a clockwise short arc
-            let side = if cw == (r > 0.0) { -1.0 } else { 1.0 };
-            let (mx, my) = (a.x + dx / 2.0, a.y + dy / 2.0);
-            (mx - side * h * dy / d, my + side * h * dx / d)
-        }
-        (None, None, _) => bail!("line {n}: arc needs I/J or R"),
-        (_, _, Some(_)) => bail!("line {n}: arc with both I/J and R"),
-        _ => (a.x + i.unwrap_or(0.0), a.y + j.unwrap_or(0.0)),
-    };
-    let (cx, cy) = centre;
-    let r0 = ((a.x - cx).powi(2) + (a.y - cy).powi(2)).sqrt();
-    let r1 = ((b.x - cx).powi(2) + (b.y - cy).powi(2)).sqrt();
-    if r0 > MAX_ARC_RADIUS {
-        bail!("line {n}: arc radius {r0:.1} mm is larger than {MAX_ARC_RADIUS} mm");
-    }
-    if (r0 - r1).abs() > 0.005 + 0.001 * r0 || r0 == 0.0 {
-        bail!("line {n}: arc end point is not on the circle (radius {r0:.4} at the start, {r1:.4} at the end)");
-    }
-    let t0 = (a.y - cy).atan2(a.x - cx);
-    let t1 = (b.y - cy).atan2(b.x - cx);
-    let tau = std::f64::consts::TAU;
-    let mut sweep = if cw { t0 - t1 } else { t1 - t0 };
-    if sweep <= 1e-12 {
-        sweep += tau;
-    }
-    let step = 2.0 * (1.0 - ARC_TOLERANCE / r0).clamp(-1.0, 1.0).acos();
-    let k = ((sweep / step.max(1e-6)).ceil() as usize).clamp(1, 1_000_000);
-    let sign = if cw { -1.0 } else { 1.0 };
-    let pt = |s: usize| {
-        if s == k {
-            return b;
-        }
-        let f = s as f64 / k as f64;
-        let t = t0 + sign * sweep * f;
-        let rr = r0 + (r1 - r0) * f;
-        DVec3::new(cx + rr * t.cos(), cy + rr * t.sin(), a.z + (b.z - a.z) * f)
-    };
-    Ok((0..k).map(|s| (pt(s), pt(s + 1))).collect())
 }
 
 #[cfg(test)]
@@ -256,8 +197,9 @@ mod tests {
         for p in [&ij, &r] {
             for s in &p.segments[1..] {
                 let m = (s.a + s.b) / 2.0;
-                // chord midpoints stay within the tolerance of the circle
-                assert!((10.0 - m.truncate().length()) <= ARC_TOLERANCE + 1e-9);
+                // GRBL's chords: midpoints within its $12 of the circle
+                let sag = 10.0 - m.truncate().length();
+                assert!((0.0..=arc::GRBL_ARC_TOLERANCE + 1e-4).contains(&sag));
                 assert!(
                     s.b.y <= 1e-9 && s.b.x >= -1e-9,
                     "clockwise quarter from +x to -y"
@@ -265,6 +207,14 @@ mod tests {
             }
         }
         assert_eq!(ij.segments.len(), r.segments.len());
+        // G18: the arc turns in the ZX plane, Y fixed
+        let zx = program("G0 X0 Y3 Z0\nG18 G3 X10 I5 K0 F100\n").unwrap();
+        assert!(zx.segments[1..].iter().all(|s| s.b.y == 3.0));
+        let top = zx.segments.iter().map(|s| s.b.z).fold(f64::MIN, f64::max);
+        assert!(
+            (top - 5.0).abs() < 0.01,
+            "G3 in G18 from X0 to X10 rises to Z5"
+        );
         assert!(program("G2 X10 Y0 I1 J0 F100\n")
             .unwrap_err()
             .0

@@ -3,6 +3,7 @@
 //! and the sender (its re-entry preamble and its resume safety) fold lines
 //! through, so that they cannot disagree about where a line goes.
 
+use super::arc::{self, Arc, Plane};
 use super::parse::Line;
 use glam::DVec3;
 
@@ -25,6 +26,8 @@ pub struct Modal {
     pub coolant: (bool, bool),
     /// The last T word (GRBL only tracks it).
     pub tool: u32,
+    /// The arc plane (G17, G18, G19).
+    pub plane: Plane,
 }
 
 /// The motion mode after G80: axis words then have nothing to do.
@@ -38,8 +41,8 @@ pub struct Step {
     pub to: Option<DVec3>,
     /// Motion mode of the move (0 rapid, 1 feed, 2/3 arcs).
     pub motion: u8,
-    /// I, J and R words in mm, for arcs.
-    pub ijr: [Option<f64>; 3],
+    /// The arc, for G2/G3.
+    pub arc: Option<Arc>,
     /// Seconds of G4 dwell.
     pub dwell: Option<f64>,
     /// GRBL finishes every earlier move before it answers this line
@@ -76,6 +79,7 @@ impl Modal {
             speed: 0.0,
             coolant: (false, false),
             tool: 0,
+            plane: Plane::Xy,
         }
     }
 
@@ -111,6 +115,9 @@ impl Modal {
                 ('G', 4) => dwell = true,
                 ('G', 20) => self.inches = true,
                 ('G', 21) => self.inches = false,
+                ('G', 17) => self.plane = Plane::Xy,
+                ('G', 18) => self.plane = Plane::Zx,
+                ('G', 19) => self.plane = Plane::Yz,
                 ('G', 90) => self.absolute = true,
                 ('G', 91) => self.absolute = false,
                 ('M', 3) | ('M', 4) => {
@@ -204,7 +211,19 @@ impl Modal {
         }
         step.relative = !self.absolute;
         step.motion = self.motion;
-        step.ijr = ['I', 'J', 'R'].map(|c| get(c).map(|v| v * scale));
+        if self.motion == 2 || self.motion == 3 {
+            let ijk = ['I', 'J', 'K'].map(|c| get(c).map(|v| v * scale));
+            let r = get('R').map(|v| v * scale);
+            if r.is_some() && ijk.iter().any(Option::is_some) {
+                return refuse(36, "arc with both I/J/K offsets and R".into());
+            }
+            let (a0, a1, _) = self.plane.axes();
+            let in_plane = axes[a0].is_some() || axes[a1].is_some();
+            match arc::setup(self.plane, self.motion == 2, self.pos, to, ijk, r, in_plane) {
+                Ok(a) => step.arc = Some(a),
+                Err((code, what)) => return refuse(code, what),
+            }
+        }
         step.to = Some(to);
         self.pos = to;
         Ok(step)

@@ -13,13 +13,14 @@ pub struct Line {
     pub comments: Vec<String>,
 }
 
-/// The G codes relievo reads: motion, dwell, the XY plane, units,
+/// The G codes relievo reads: motion, dwell, the arc planes, units,
 /// distance modes, feed per minute, and what other CAM programs' GRBL
 /// posts put in their preambles with no effect here (G40 cutter
 /// compensation off, G49 tool length offset off while none is set, G54
 /// while its offset is zero, G61 exact path, G80 motion off, G91.1).
-const G_CODES: [f64; 17] = [
-    0.0, 1.0, 2.0, 3.0, 4.0, 17.0, 20.0, 21.0, 40.0, 49.0, 54.0, 61.0, 80.0, 90.0, 91.0, 91.1, 94.0,
+const G_CODES: [f64; 19] = [
+    0.0, 1.0, 2.0, 3.0, 4.0, 17.0, 18.0, 19.0, 20.0, 21.0, 40.0, 49.0, 54.0, 61.0, 80.0, 90.0,
+    91.0, 91.1, 94.0,
 ];
 /// Program stops, spindle, coolant.
 const M_CODES: [f64; 10] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 7.0, 8.0, 9.0, 30.0];
@@ -97,7 +98,7 @@ pub fn parse_line(text: &str, number: usize) -> Result<Line> {
         match letter {
             'G' if !G_CODES.contains(&value) => bail!("line {number}: unsupported command G{num}"),
             'M' if !M_CODES.contains(&value) => bail!("line {number}: unsupported command M{num}"),
-            'G' | 'M' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'N' | 'T' => {}
+            'G' | 'M' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'F' | 'S' | 'P' | 'N' | 'T' => {}
             _ => bail!("line {number}: unsupported word '{letter}{num}'"),
         }
         words.push((letter, value));

@@ -236,6 +236,9 @@ pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
     if m.inches {
         out.push("G20".into());
     }
+    if m.plane != crate::gcode::arc::Plane::Xy {
+        out.push(format!("G{}", m.plane.code()));
+    }
     if !m.absolute {
         out.push("G91".into());
     }

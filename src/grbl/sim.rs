@@ -305,7 +305,7 @@ impl SimGrbl {
             p.x,
             p.y,
             p.z,
-            PLANNER_BLOCKS - self.planner.len(),
+            PLANNER_BLOCKS.saturating_sub(self.planner.len()),
             self.rx_size - self.rx.len(),
             self.modal.feed.unwrap_or(0.0).round(),
             self.spindle.round()
@@ -435,7 +435,27 @@ impl SimGrbl {
                     return self.say("ok");
                 }
                 if !self.check {
-                    self.queue(step.from, to, line);
+                    match step.arc {
+                        // GRBL plans an arc as its chords (the line is
+                        // done with the last; the planner may run over
+                        // its 15 blocks meanwhile, as no new line is
+                        // taken until it has room again)
+                        Some(a) => {
+                            let pts =
+                                a.points(step.from, to, crate::gcode::arc::GRBL_ARC_TOLERANCE);
+                            let mut from = step.from;
+                            for (k, q) in pts.iter().enumerate() {
+                                let l = if k + 1 == pts.len() {
+                                    line.clone()
+                                } else {
+                                    String::new()
+                                };
+                                self.queue(from, *q, l);
+                                from = *q;
+                            }
+                        }
+                        None => self.queue(step.from, to, line),
+                    }
                 }
             }
             None if !self.check => self.note(line),
@@ -446,6 +466,9 @@ impl SimGrbl {
 
     /// A line without motion is executed once the moves before it are.
     fn note(&mut self, line: String) {
+        if line.is_empty() {
+            return; // an arc's inner chord: its line goes with the last
+        }
         match self.planner.back_mut() {
             Some(b) => b.lines.push(line),
             None => self.log.push(line),
@@ -530,7 +553,7 @@ impl SimGrbl {
         self.planner.push_back(Block {
             duration,
             end: target,
-            lines: vec![line],
+            lines: if line.is_empty() { vec![] } else { vec![line] },
         });
     }
 

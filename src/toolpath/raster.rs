@@ -4,6 +4,16 @@
 
 use super::dropcutter::HeightField;
 use super::path::{drop_along, merge, Refine};
+
+/// How a row's dropped points become moves: straight moves merged within
+/// the tolerance, or arcs in the row's plane where a circle fits.
+pub fn thin(points: &[DVec3], tol: f64, arcs: bool) -> Vec<DVec3> {
+    if arcs {
+        super::arcs::fit(points, tol)
+    } else {
+        merge(points, tol)
+    }
+}
 use crate::tool::Tool;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -101,16 +111,18 @@ pub fn zigzag(
     cl: &[Vec<DVec3>],
     floor: f64,
     tol: f64,
+    arcs: bool,
 ) -> Vec<DVec3> {
     let passes: Vec<Vec<DVec3>> = cl
         .par_iter()
         .enumerate()
         .map(|(k, row)| {
-            let mut m = merge(row, tol);
             if k % 2 == 1 {
-                m.reverse();
+                let rev: Vec<DVec3> = row.iter().rev().copied().collect();
+                thin(&rev, tol, arcs)
+            } else {
+                thin(row, tol, arcs)
             }
-            m
         })
         .collect();
     let mut out: Vec<DVec3> = Vec::new();
@@ -139,14 +151,15 @@ pub fn zigzag(
 /// another toward the left of their direction, so the uncut side is on the
 /// left: climb (material on the right of a clockwise spindle) runs them
 /// backwards.
-pub fn one_way(cl: &[Vec<DVec3>], climb: bool, tol: f64) -> Vec<Vec<DVec3>> {
+pub fn one_way(cl: &[Vec<DVec3>], climb: bool, tol: f64, arcs: bool) -> Vec<Vec<DVec3>> {
     cl.par_iter()
         .map(|row| {
-            let mut m = merge(row, tol);
             if climb {
-                m.reverse();
+                let rev: Vec<DVec3> = row.iter().rev().copied().collect();
+                thin(&rev, tol, arcs)
+            } else {
+                thin(row, tol, arcs)
             }
-            m
         })
         .collect()
 }
