@@ -505,7 +505,7 @@ mod arc_tests {
             if rev {
                 pts.reverse();
             }
-            let fitted = crate::toolpath::arcs::fit(&pts, 0.005);
+            let fitted = crate::toolpath::arcs::fit(&pts, 0.01);
             let mut e = Emitter::new(&[], &s, false, 0.0);
             e.arcs = true;
             e.pass(&fitted, &s, 5.0);
