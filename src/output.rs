@@ -119,6 +119,11 @@ impl<'a> Outputs<'a> {
             }
         }
         for (k, path) in paths.iter().enumerate() {
+            if interrupt::holding() {
+                // a held output goes with an interruption from the moment
+                // it exists under its name
+                interrupt::remove_on_interrupt(path);
+            }
             if let Err(e) = std::fs::rename(&written[k], path) {
                 cleanup(&written[k..]);
                 for p in &paths[..k] {
@@ -127,25 +132,39 @@ impl<'a> Outputs<'a> {
                 bail!("{}: cannot write: {e}", path.display());
             }
         }
-        interrupt::keep_all();
+        written.iter().for_each(|t| interrupt::forget(t));
         Ok(())
     }
 }
 
 /// Files to remove if the process is interrupted (SIGINT, SIGTERM) before
-/// they are final: temporary files, and a `carve`'s relief until its job
-/// is written. The handler only calls `unlink` and `_exit`, which are safe
+/// they are final: temporary files, and, while outputs are held, every
+/// output from the moment it is renamed into place (a `carve`'s relief
+/// until its job is written). The handler only calls `unlink` and `_exit`, which are safe
 /// in a signal handler; paths are held in a fixed table of leaked C strings.
 pub mod interrupt {
     use std::ffi::CString;
     use std::path::Path;
-    use std::sync::atomic::{AtomicPtr, Ordering};
+    use std::sync::atomic::{AtomicBool, AtomicPtr, Ordering};
     use std::sync::Once;
 
     const SLOTS: usize = 64;
     static PATHS: [AtomicPtr<libc::c_char>; SLOTS] =
         [const { AtomicPtr::new(std::ptr::null_mut()) }; SLOTS];
     static INSTALL: Once = Once::new();
+    static HOLD: AtomicBool = AtomicBool::new(false);
+
+    /// From now on, outputs stay removable on interruption until
+    /// `keep_all`; registering them before their rename leaves no moment in
+    /// which an interruption keeps one without the others.
+    pub fn hold() {
+        HOLD.store(true, Ordering::SeqCst);
+    }
+
+    /// Whether outputs are held (see `hold`).
+    pub fn holding() -> bool {
+        HOLD.load(Ordering::SeqCst)
+    }
 
     extern "C" fn on_signal(_: libc::c_int) {
         for slot in &PATHS {
@@ -183,8 +202,23 @@ pub mod interrupt {
         }
     }
 
+    /// `path` no longer needs removing (a temporary file renamed away).
+    pub fn forget(path: &Path) {
+        use std::os::unix::ffi::OsStrExt;
+        for slot in &PATHS {
+            let p = slot.load(Ordering::SeqCst);
+            // SAFETY: p is null or a leaked, NUL-terminated CString
+            if !p.is_null()
+                && unsafe { std::ffi::CStr::from_ptr(p) }.to_bytes() == path.as_os_str().as_bytes()
+            {
+                slot.store(std::ptr::null_mut(), Ordering::SeqCst);
+            }
+        }
+    }
+
     /// The registered files are final: keep them whatever happens.
     pub fn keep_all() {
+        HOLD.store(false, Ordering::SeqCst);
         for slot in &PATHS {
             slot.store(std::ptr::null_mut(), Ordering::SeqCst);
         }

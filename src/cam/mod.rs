@@ -1263,10 +1263,12 @@ impl ToolpathJob {
         let steep_only = self.finish == Finish::RasterWaterline;
         for level in waterline::levels(&g, dz) {
             let (w, h) = (relief.width_mm, relief.height_mm);
+            // beside a raster, steep ground takes every m-th level only
+            let k = ((level - floor) / dz).round() as i64;
             let keep = |p: DVec3, slope: f64| {
                 (0.0..=w).contains(&p.x)
                     && (0.0..=h).contains(&p.y)
-                    && (!steep_only || slope >= waterline::GENTLEST)
+                    && (!steep_only || waterline::every_nth(slope).is_some_and(|m| k % m == 0))
                     && keep_also.is_none_or(|f| f(p.x, p.y))
             };
             let cs: Vec<waterline::Contour> = waterline::contours(&g, level)

@@ -34,12 +34,10 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
         material,
     );
     relievo::output::check_writable(&args.output)?;
+    // all or nothing, also when interrupted: no relief without its job
+    relievo::output::interrupt::hold();
     let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
     super::relief::say_notes(&rjob, &r.warnings, quiet);
-    // all or nothing, also when interrupted: no relief without its job
-    for p in &r.written {
-        relievo::output::interrupt::remove_on_interrupt(p);
-    }
     let s = match super::with_spinner(quiet, "planning and checking the job", || {
         cam.run(&r.relief)
     }) {
@@ -52,6 +50,7 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
             return Err(e);
         }
     };
+    relievo::output::interrupt::keep_all();
     if !quiet {
         eprintln!("relief -> {}", relief_path.display());
     }

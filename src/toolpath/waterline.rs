@@ -162,6 +162,25 @@ pub struct Contour {
 /// waterline lines).
 pub const GENTLEST: f64 = 0.08;
 
+/// Beside a raster, which levels (every m-th, levels `stepover * GENTLEST`
+/// apart) a waterline takes on CL ground of this slope; None where it is
+/// gentler than GENTLEST. Passes lie at most 0.8 stepover apart along the
+/// surface (m * GENTLEST <= 0.8 sin(angle of the slope)), a margin for the
+/// contours' own departures from the grid's slope; m is a power of
+/// two, so a contour crossing from one steepness to the next stays whole
+/// on every level both keep. A wall takes an eighth of the levels.
+pub fn every_nth(slope: f64) -> Option<i64> {
+    if slope < GENTLEST {
+        return None;
+    }
+    let sin = slope / (1.0 + slope * slope).sqrt();
+    let mut m = 1;
+    while (2 * m) as f64 * GENTLEST <= 0.8 * sin {
+        m *= 2;
+    }
+    Some(m)
+}
+
 /// The closed contours of the CL surface at `level`, each point on the
 /// exact CL surface within LEVEL_TOL below the level.
 pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
@@ -384,7 +403,7 @@ fn crossing(
 /// is shorter than a micrometre. Keeps `clear`'s lifts, and so a
 /// waterline's departures from its level, in the micrometres.
 pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour {
-    use super::path::move_gouge;
+    use super::path::probe_gouge;
     let level = c.pts[0].z;
     let cl = |x: f64, y: f64| hf.drop(tool, x, y).unwrap_or(floor).max(floor);
     let mut pts = vec![c.pts[0]];
@@ -394,7 +413,9 @@ pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour
         while let Some((a, b, depth)) = todo.pop() {
             let d = (b - a).truncate();
             let len = d.length();
-            if depth < 12 && len > 1e-3 && move_gouge(hf, tool, a, b) > REFINE_DIP {
+            // the drop-cutter's probes alone decide a split (the exact
+            // sweep over the samples is `clear`'s, once thinned)
+            if depth < 12 && len > 1e-3 && probe_gouge(hf, tool, a, b, REFINE_DIP) > REFINE_DIP {
                 // the highest CL point along the chord, and a point on its
                 // free side to search from
                 let n = (len / (hf.pitch / 4.0)).ceil().max(2.0) as usize;
