@@ -6,38 +6,6 @@ use common::*;
 use relievo::tool::Tool;
 use relievo::toolpath::dropcutter::HeightField;
 
-/// Lowest surface a tool can reach over each sample: the envelope of the
-/// tool placed on the CL surface at every sample centre.
-fn reachable(hf: &HeightField, tool: &Tool, w: usize, h: usize) -> Vec<f64> {
-    let p = hf.pitch;
-    let k = (tool.radius() / p).ceil() as isize;
-    let cl: Vec<Option<f64>> = (0..w * h)
-        .map(|i| {
-            let (x, y) = hf.centre(i % w, i / w);
-            hf.drop(tool, x, y)
-        })
-        .collect();
-    (0..w * h)
-        .map(|i| {
-            let (ci, cj) = ((i % w) as isize, (i / w) as isize);
-            let mut best = f64::INFINITY;
-            for dj in -k..=k {
-                for di in -k..=k {
-                    let (ii, jj) = (ci + di, cj + dj);
-                    if ii < 0 || jj < 0 || ii >= w as isize || jj >= h as isize {
-                        continue;
-                    }
-                    if let Some(z) = cl[jj as usize * w + ii as usize] {
-                        let rho = ((di * di + dj * dj) as f64).sqrt() * p;
-                        best = best.min(z + tool.profile(rho));
-                    }
-                }
-            }
-            best
-        })
-        .collect()
-}
-
 /// What an ideal raster (exact ball positions every half sample along rows
 /// y = 0, s, 2s, ..., h) leaves at each sample: the scallop of the
 /// stepover on this very surface, creases and all.

@@ -12,7 +12,7 @@ use crate::sim;
 use crate::timing::Timings;
 use crate::tool::Tool;
 use crate::toolpath::dropcutter::HeightField;
-use crate::toolpath::{path, raster, rough, waterline, Pass};
+use crate::toolpath::{path, pencil, raster, rough, waterline, Pass};
 use glam::DVec3;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
@@ -22,6 +22,7 @@ pub mod cutout;
 mod judge;
 pub mod layout;
 mod order;
+pub mod rest;
 mod stock;
 pub mod tile;
 mod view;
@@ -175,6 +176,8 @@ pub struct ToolpathJob {
     pub material: Option<String>,
     pub origin: Origin,
     pub rough: Option<Roughing>,
+    /// A smaller tool after the finish, where it left too much.
+    pub rest: Option<rest::Rest>,
     /// Roughing in its own file (NAME-rough.nc) instead of an M0 tool change.
     pub split: bool,
     /// Write cuts deeper than the tools' limits (and say so).
@@ -359,10 +362,27 @@ impl ToolpathJob {
         let floor = -relief.depth_mm;
         let (pw, ph) = (relief.width_mm, relief.height_mm);
         let panel = [0.0, 0.0, pw, ph];
-        let min_r = match &self.rough {
-            Some(r) => m.tool(&r.tool)?.radius().min(tool.radius()),
-            None => tool.radius(),
-        };
+        let rest_tool = self.rest.as_ref().map(|r| m.tool(&r.tool)).transpose()?;
+        if let (Some(r), Some(rt)) = (&self.rest, &rest_tool) {
+            if rt.working_diameter() >= tool.working_diameter() {
+                bail!(
+                    "--rest {}: {} is not smaller than the finishing tool {}",
+                    r.tool,
+                    rt.spec(),
+                    tool.spec()
+                );
+            }
+            if !(r.threshold.is_finite() && r.threshold > 0.0) {
+                bail!("--rest-threshold {}: must be positive, mm", r.threshold);
+            }
+        }
+        let min_r = [
+            self.rough.as_ref().map(|r| m.tool(&r.tool)).transpose()?,
+            rest_tool,
+        ]
+        .into_iter()
+        .flatten()
+        .fold(tool.radius(), |a, t| a.min(t.radius()));
         let cell = layout::cell(relief.pitch_mm(), min_r.max(0.05));
         let mut planned = stock::Planned::new(plan.stock_in_panel(cell, ph));
         let mut ops: Vec<Op> = Vec::new();
@@ -651,6 +671,22 @@ impl ToolpathJob {
             strategy: format!("finishing, {}", what.join(" + ")),
             passes,
         });
+        if let (Some(r), Some(rt)) = (&self.rest, rest_tool) {
+            let subject = subject.as_ref();
+            let op = t.time("rest", || {
+                self.rest_op(
+                    r,
+                    (&tool, rt),
+                    (&hf, relief, floor),
+                    &mut planned,
+                    subject,
+                    (&m, material.as_ref(), &limits),
+                    &mut notes,
+                    &mut raw_points,
+                )
+            })?;
+            ops.extend(op);
+        }
         // the cutout last: the panel stays held by the whole stock while
         // it is carved
         if let Some(c) = &self.cutout {
@@ -1037,6 +1073,110 @@ impl ToolpathJob {
                 clear_z: p.clear_z,
             })
             .collect()
+    }
+
+    /// The rest pass: `rt` in layers where the planned stock holds more
+    /// than it may cut at once, then a raster at its finishing stepover,
+    /// both only near where the tools before it left more than the
+    /// threshold (the rows on either side of such a place both come in).
+    /// None (and a note) where nothing is left.
+    #[allow(clippy::too_many_arguments)]
+    fn rest_op(
+        &self,
+        r: &rest::Rest,
+        (finishing, rt): (&Tool, Tool),
+        (hf, relief, floor): (&HeightField, &Relief, f64),
+        planned: &mut stock::Planned,
+        subject: Option<&boundary::Subject>,
+        (m, material, limits): (&Machine, Option<&crate::materials::Material>, &Limits),
+        notes: &mut Vec<String>,
+        raw_points: &mut usize,
+    ) -> Result<Option<Op>> {
+        let settings = self.settings(m, &rt, material, notes)?;
+        let step = material
+            .and_then(|mt| mt.cutting_for(rt.working_diameter()))
+            .map(|c| Stepover::Percent(c.finish_stepover))
+            .or(self.stepover.filter(|s| matches!(s, Stepover::Percent(_))))
+            .unwrap_or(Stepover::Percent(10.0))
+            .mm(&rt)?;
+        let left = rest::Unfinished::find(planned, relief, r.threshold, step + planned.stock.pitch);
+        if left.share() == 0.0 {
+            notes.push(format!(
+                "--rest {}: nothing left over {} mm; no rest pass",
+                rt.spec(),
+                r.threshold
+            ));
+            return Ok(None);
+        }
+        let keep = |x: f64, y: f64| left.near(x, y) && subject.is_none_or(|s| s.is_near(x, y));
+        let panel = [0.0, 0.0, relief.width_mm, relief.height_mm];
+        let mut passes = Vec::new();
+        if let Some((layers, depth)) = self.rest_layers(
+            hf,
+            &rt,
+            planned,
+            panel,
+            floor,
+            limits.layer(&rt),
+            &settings,
+            Some(&keep),
+        ) {
+            *raw_points += layers.iter().map(|p| p.pts.len()).sum::<usize>();
+            notes.push(format!(
+                "{} steps down in layers of {depth:.2} mm where more is left than it may cut",
+                rt.spec()
+            ));
+            passes.extend(planned.ramp_and_cut(layers, rt, false));
+        }
+        let (rows, raw) = self.raster(hf, &rt, panel, floor, step, Some(&keep));
+        *raw_points += raw;
+        let rows = order::tour(rows, None);
+        let rows = rest::linked(hf, &rt, rows, floor, self.tolerance, rt.working_diameter());
+        let rows = rows
+            .into_iter()
+            .map(|pts| Pass {
+                pts,
+                clear_z: settings.safe_z,
+            })
+            .collect();
+        passes.extend(planned.ramp_and_cut(rows, rt, true));
+        // pencil passes last, one clean line along each crease: valleys
+        // of the rest tool's CL surface sharper than the finishing tool
+        // fits into
+        let kappa = 1.0 / (finishing.radius() - rt.radius()).max(rt.radius());
+        let pencil: Vec<Vec<DVec3>> = pencil::lines(hf, &rt, panel, floor, kappa, &keep)
+            .par_iter()
+            .map(|l| {
+                let m = path::merge(l, self.tolerance);
+                path::check_and_refine(hf, &rt, &m, floor, self.tolerance)
+            })
+            .collect();
+        let n_pencil = pencil.len();
+        *raw_points += pencil.iter().map(Vec::len).sum::<usize>();
+        let start = passes.last().and_then(|p: &Pass| p.pts.last().copied());
+        let pencil = order::tour(pencil, start)
+            .into_iter()
+            .map(|pts| Pass {
+                pts,
+                clear_z: settings.safe_z,
+            })
+            .collect();
+        passes.extend(planned.ramp_and_cut(pencil, rt, true));
+        let what = format!(
+            "rest machining where more than {} mm was left ({:.1}% of the stock), raster, \
+             stepover {step:.4} mm, then {n_pencil} pencil passes along creases",
+            r.threshold,
+            100.0 * left.share()
+        );
+        notes.push(format!("{}: {what}", rt.spec()));
+        Ok(Some(Op {
+            title: "rest",
+            tool: rt,
+            zero: String::new(),
+            settings,
+            strategy: what,
+            passes,
+        }))
     }
 
     /// The finishing tool in layers over `region` wherever the planned

@@ -69,6 +69,14 @@ pub struct CutOpts {
         allow_negative_numbers = true
     )]
     pub stock_to_leave: f64,
+    /// After the finish, a smaller tool (ball:D, ... or a tool-table name)
+    /// only where the finish left more than --rest-threshold, as the
+    /// simulated cut shows: creases the finishing tool cannot reach.
+    #[arg(long)]
+    pub rest: Option<String>,
+    /// Material left over the relief (mm) that calls for the rest tool.
+    #[arg(long, default_value_t = relievo::cam::rest::THRESHOLD, requires = "rest")]
+    pub rest_threshold: f64,
     /// Write the roughing to NAME-rough.nc instead of one job with an M0
     /// tool change.
     #[arg(long, requires = "rough")]
@@ -201,6 +209,10 @@ impl CutOpts {
                 step_down: self.step_down,
                 stepover: self.rough_stepover,
                 stock_to_leave: self.stock_to_leave,
+            }),
+            rest: self.rest.map(|tool| relievo::cam::rest::Rest {
+                tool,
+                threshold: self.rest_threshold,
             }),
             split: self.split,
             output,

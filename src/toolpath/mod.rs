@@ -5,6 +5,7 @@
 pub mod arcs;
 pub mod dropcutter;
 pub mod path;
+pub mod pencil;
 pub mod raster;
 pub mod rough;
 pub mod waterline;
