@@ -186,7 +186,8 @@ fn realtime_bytes_in_job_lines_are_refused() {
     for (bad, byte) in [
         ("G1 X1 ! Y2", "0x21"),
         ("G1 X~2", "0x7e"),
-        ("G1 X\u{18}1", "0x18"),
+        ("G1 X?1", "0x3f"),
+        ("G1 X\u{85}1", "0xc2"),
     ] {
         let path = d.join("rt.nc");
         std::fs::write(&path, format!("G21 G90\nG1 X0 F100\n{bad}\nM30\n")).unwrap();
@@ -332,7 +333,7 @@ fn check_mode_reports_and_moves_nothing() {
     let path = d.join("bad.nc");
     std::fs::write(
         &path,
-        "G21 G90\nG1 X1 Y1 F500\nG1 X2 Y2\nG38.2 Z-1 F10\nG1 X3\n",
+        "G21 G90\nG1 X1 Y1 F500\nG1 X2 Y2\nG38.1 Z-1 F10\nG1 X3\n",
     )
     .unwrap();
     let mut p = port(Faults::default());

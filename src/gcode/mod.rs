@@ -93,7 +93,7 @@ pub fn program(text: &str) -> Result<Program> {
     let mut max_z = 0.0f64;
     let mut count = 0;
     for (k, l) in text.lines().enumerate() {
-        let line = parse::parse_line(l, k + 1)?;
+        let line = parse::parse_line(l, k + 1);
         for w in line.words.iter().filter(|w| w.0 == 'Z') {
             max_z = max_z.max(w.1);
         }
@@ -106,7 +106,12 @@ pub fn program(text: &str) -> Result<Program> {
     let mut modal = modal::Modal::new(DVec3::new(0.0, 0.0, max_z));
     let mut stop = true;
     for (k, l) in text.lines().enumerate() {
-        let l = &parse::parse_line(l, k + 1)?;
+        // '%' marks a program's start and end in a file; senders do not
+        // send it
+        if parse::strip(l) == "%" {
+            continue;
+        }
+        let l = &parse::parse_line(l, k + 1);
         if p.segments.len() > MAX_SEGMENTS {
             bail!(
                 "line {}: the job comes to more than {} million moves (arcs in GRBL's \
@@ -130,11 +135,17 @@ pub fn program(text: &str) -> Result<Program> {
         let n = l.number;
         let step = modal
             .apply(l)
-            .map_err(|r| crate::Error(format!("line {n}: {}", r.what)))?;
+            .map_err(|r| crate::Error(format!("line {n}: GRBL error:{} ({})", r.code, r.what)))?;
+        if step.probe.is_some() {
+            bail!(
+                "line {n}: a probing move (G38.x): where it stops depends on what it touches; \
+                 simulate the job from after its touch-off"
+            );
+        }
         stop |= step.sync;
         p.dwell_s += step.dwell.unwrap_or(0.0);
         let Some(target) = step.to else { continue };
-        let (pos, motion) = (step.from, step.motion);
+        let (mut pos, motion) = (step.from, step.motion);
         let kind = if motion == 0 { Kind::Rapid } else { Kind::Feed };
         let f = match kind {
             Kind::Rapid => 0.0,
@@ -151,6 +162,11 @@ pub fn program(text: &str) -> Result<Program> {
             });
             *stop_before = false;
         };
+        // G28/G30: by the point given, then to the stored one
+        if let Some(via) = step.via.filter(|&v| v != pos) {
+            push(pos, via, &mut stop);
+            pos = via;
+        }
         match step.arc {
             Some(a) => {
                 if a.radius > MAX_ARC_RADIUS {

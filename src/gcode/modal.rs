@@ -1,22 +1,37 @@
-//! The modal state of a GRBL machine and what one line does to it: the
+//! The modal state of a GRBL 1.1 machine and what one line does to it: the
 //! one interpreter that `simulate` (through `program`), the simulated GRBL
 //! and the sender (its re-entry preamble and its resume safety) fold lines
-//! through, so that they cannot disagree about where a line goes.
+//! through, so that they cannot disagree about where a line goes. It
+//! follows GRBL 1.1h's gc_execute_line (default build) check for check and
+//! in its order, so that a line it refuses gets GRBL's own error code.
 
 use super::arc::{self, Arc, Plane};
 use super::parse::Line;
 use glam::DVec3;
 
-/// Units, distance mode, motion mode, feed, spindle and position.
+/// What GRBL keeps in its EEPROM and so across resets: the six work
+/// coordinate systems (G54-G59) and the G28 and G30 positions (machine
+/// coordinates, mm).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Stored {
+    pub wcs: [DVec3; 6],
+    pub g28: DVec3,
+    pub g30: DVec3,
+}
+
+/// Units, distance mode, motion mode, feed, spindle, offsets, position.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Modal {
-    /// Where the tool is after the lines folded so far (mm).
+    /// Where the tool is after the lines folded so far (machine
+    /// coordinates, mm).
     pub pos: DVec3,
-    /// G0, G1, G2 or G3.
+    /// G0, G1, G2, G3, G80 (NO_MOTION) or a probe (PROBE_TOWARD ..).
     pub motion: u8,
     pub absolute: bool,
     pub inches: bool,
-    /// mm/min.
+    /// G93: F is the inverse of each move's time, given on its line.
+    pub inverse_time: bool,
+    /// mm/min (G94), or 1/min (G93).
     pub feed: Option<f64>,
     /// M3 or M4 while the spindle is on.
     pub spindle: Option<u8>,
@@ -24,25 +39,49 @@ pub struct Modal {
     pub speed: f64,
     /// Mist (M7) and flood (M8) coolant.
     pub coolant: (bool, bool),
-    /// The last T word (GRBL only tracks it).
+    /// The last T word (GRBL only tracks it; a line without T sets 0).
     pub tool: u32,
     /// The arc plane (G17, G18, G19).
     pub plane: Plane,
+    /// The work coordinate system in use: 0 = G54 .. 5 = G59.
+    pub coord: usize,
+    /// The G92 offset, mm.
+    pub g92: DVec3,
+    /// The tool length offset along Z (G43.1), mm; 0 after G49.
+    pub tlo: f64,
+    /// G43.1 (rather than G49) in force.
+    pub tlo_on: bool,
+    pub stored: Stored,
 }
 
 /// The motion mode after G80: axis words then have nothing to do.
 pub const NO_MOTION: u8 = 80;
+/// G38.2 (toward the work, an alarm if nothing touches); G38.3, G38.4
+/// (away) and G38.5 follow as GRBL numbers them.
+pub const PROBE_TOWARD: u8 = 140;
+
+/// A probing move: toward or away from the work, and whether missing is
+/// an alarm (G38.2, G38.4) or not (G38.3, G38.5).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Probe {
+    pub away: bool,
+    pub must_touch: bool,
+}
 
 /// What one line does.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Step {
     pub from: DVec3,
-    /// The end of the line's move, when it moves.
+    /// The end of the line's move, when it moves (machine coordinates).
     pub to: Option<DVec3>,
-    /// Motion mode of the move (0 rapid, 1 feed, 2/3 arcs).
+    /// G28/G30 with axis words: the point the move passes on its way.
+    pub via: Option<DVec3>,
+    /// Motion mode of the move (0 rapid, 1 feed, 2/3 arcs, probes).
     pub motion: u8,
     /// The arc, for G2/G3.
     pub arc: Option<Arc>,
+    /// The probe, for G38.x: the move stops where it touches.
+    pub probe: Option<Probe>,
     /// Seconds of G4 dwell.
     pub dwell: Option<f64>,
     /// GRBL finishes every earlier move before it answers this line
@@ -53,6 +92,10 @@ pub struct Step {
     pub relative: bool,
     /// M0: GRBL holds once the moves before it are done, until cycle start.
     pub pause: bool,
+    /// M2/M30: the program's end (some modes reset, "[MSG:Pgm End]").
+    pub end: bool,
+    /// A `$J=` jog: it moves, and changes no mode.
+    pub jog: bool,
 }
 
 /// A line GRBL refuses: its `error:N` code and what is wrong.
@@ -62,170 +105,581 @@ pub struct Refusal {
     pub what: String,
 }
 
-fn refuse<T>(code: u32, what: String) -> Result<T, Refusal> {
-    Err(Refusal { code, what })
+fn refuse<T>(code: u32, what: impl Into<String>) -> Result<T, Refusal> {
+    Err(Refusal {
+        code,
+        what: what.into(),
+    })
 }
 
+// modal groups, as GRBL's bits
+const G_NON_MODAL: u32 = 1 << 0;
+const G_MOTION: u32 = 1 << 1;
+const G_PLANE: u32 = 1 << 2;
+const G_DISTANCE: u32 = 1 << 3;
+const G_ARC_DISTANCE: u32 = 1 << 4;
+const G_FEED_MODE: u32 = 1 << 5;
+const G_UNITS: u32 = 1 << 6;
+const G_CUTTER: u32 = 1 << 7;
+const G_TOOL_LENGTH: u32 = 1 << 8;
+const G_COORD: u32 = 1 << 9;
+const G_PATH: u32 = 1 << 10;
+const M_FLOW: u32 = 1 << 11;
+const M_SPINDLE: u32 = 1 << 12;
+const M_COOLANT: u32 = 1 << 13;
+
+/// What claims the block's axis words.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum AxisCommand {
+    None,
+    NonModal,
+    Motion,
+    ToolLength,
+}
+
+/// The value words GRBL reads, by letter.
+const VALUE_WORDS: &str = "FIJKLNPRSTXYZ";
+
+fn bit(c: char) -> u32 {
+    1 << (c as u32 - 'A' as u32)
+}
+
+const N_COORD_SYSTEMS: f64 = 6.0;
+const MAX_LINE_NUMBER: f64 = 10_000_000.0;
+const MAX_TOOL_NUMBER: f64 = 255.0;
+
 impl Modal {
-    /// GRBL after power-up or a reset, with the tool at `pos`.
+    /// GRBL after power-up, with the tool at `pos` and nothing stored.
     pub fn new(pos: DVec3) -> Modal {
         Modal {
             pos,
             motion: 0,
             absolute: true,
             inches: false,
+            inverse_time: false,
             feed: None,
             spindle: None,
             speed: 0.0,
             coolant: (false, false),
             tool: 0,
             plane: Plane::Xy,
+            coord: 0,
+            g92: DVec3::ZERO,
+            tlo: 0.0,
+            tlo_on: false,
+            stored: Stored::default(),
         }
     }
 
-    fn scale(&self) -> f64 {
-        if self.inches {
-            25.4
-        } else {
-            1.0
+    /// GRBL after a reset with the tool at `pos`: every mode back to its
+    /// default, G92 and the tool length offset cleared, what the EEPROM
+    /// holds kept.
+    pub fn after_reset(&self, pos: DVec3) -> Modal {
+        Modal {
+            stored: self.stored.clone(),
+            ..Modal::new(pos)
         }
+    }
+
+    /// The work coordinate offset: machine = work + wco.
+    pub fn wco(&self) -> DVec3 {
+        self.stored.wcs[self.coord] + self.g92 + DVec3::new(0.0, 0.0, self.tlo)
     }
 
     /// Fold `l` into the state. A refused line leaves the state as it was.
     pub fn apply(&mut self, l: &Line) -> Result<Step, Refusal> {
+        self.apply_as(l, false)
+    }
+
+    /// Fold the words of a `$J=` jog line: it moves, modes stay.
+    pub fn jog(&mut self, l: &Line) -> Result<Step, Refusal> {
+        self.apply_as(l, true)
+    }
+
+    fn apply_as(&mut self, l: &Line, jog: bool) -> Result<Step, Refusal> {
         let mut next = self.clone();
-        let step = next.fold(l)?;
-        *self = next;
+        let step = next.fold(l, jog)?;
+        if jog {
+            self.pos = next.pos;
+        } else {
+            *self = next;
+        }
         Ok(step)
     }
 
-    fn fold(&mut self, l: &Line) -> Result<Step, Refusal> {
-        let get = |c: char| l.words.iter().rev().find(|w| w.0 == c).map(|w| w.1);
+    /// GRBL's gc_execute_line on a copy of the state (`self`), `old`
+    /// being the state before the line.
+    fn fold(&mut self, l: &Line, jog: bool) -> Result<Step, Refusal> {
+        let old = self.clone();
         let mut step = Step {
-            from: self.pos,
+            from: old.pos,
             ..Step::default()
         };
-        let mut new_motion = None;
-        let mut dwell = false;
-        for &(c, v) in &l.words {
-            match (c, v as i32) {
-                // G91.1: arc centres are incremental, as they always are
-                ('G', 91) if v != 91.0 => {}
-                ('G', 0..=3) => new_motion = Some(v as u8),
-                ('G', 4) => dwell = true,
-                ('G', 20) => self.inches = true,
-                ('G', 21) => self.inches = false,
-                ('G', 17) => self.plane = Plane::Xy,
-                ('G', 18) => self.plane = Plane::Zx,
-                ('G', 19) => self.plane = Plane::Yz,
-                ('G', 90) => self.absolute = true,
-                ('G', 91) => self.absolute = false,
-                ('M', 3) | ('M', 4) => {
-                    self.spindle = Some(v as u8);
-                    step.sync = true;
+        // step 2: the words, in order
+        let mut groups = 0u32;
+        let mut seen = 0u32;
+        let mut val = [0.0f64; 26];
+        let mut axis_command = AxisCommand::None;
+        let mut non_modal: Option<u16> = None;
+        let mut flow: Option<u8> = None;
+        let mut tool_length: Option<bool> = None;
+        if jog {
+            self.motion = 1;
+            self.inverse_time = false;
+        }
+        let claim = |cmd: &mut AxisCommand, to: AxisCommand| {
+            if *cmd != AxisCommand::None {
+                return refuse(24, "two commands in the block use the axis words");
+            }
+            *cmd = to;
+            Ok(())
+        };
+        for &(c, value) in &l.words {
+            let int = value.trunc();
+            let mut mantissa = (100.0 * (value - int)).round() as i64;
+            let int = int as i64;
+            match c {
+                'G' => {
+                    let group = match int {
+                        4 | 10 | 28 | 30 | 53 | 92 => {
+                            if matches!(int, 10 | 28 | 30 | 92) && mantissa == 0 {
+                                claim(&mut axis_command, AxisCommand::NonModal)?;
+                            }
+                            let mut code = int as u16;
+                            if matches!(int, 28 | 30 | 92) {
+                                if mantissa != 0 && mantissa != 10 {
+                                    return refuse(20, format!("unsupported command G{value}"));
+                                }
+                                code += mantissa as u16;
+                                mantissa = 0;
+                            }
+                            non_modal = Some(code);
+                            G_NON_MODAL
+                        }
+                        0..=3 | 38 => {
+                            claim(&mut axis_command, AxisCommand::Motion)?;
+                            self.motion = int as u8;
+                            if int == 38 {
+                                if !matches!(mantissa, 20 | 30 | 40 | 50) {
+                                    return refuse(20, format!("unsupported probe G{value}"));
+                                }
+                                self.motion = PROBE_TOWARD + (mantissa / 10 - 2) as u8;
+                                mantissa = 0;
+                            }
+                            G_MOTION
+                        }
+                        80 => {
+                            self.motion = NO_MOTION;
+                            G_MOTION
+                        }
+                        17..=19 => {
+                            self.plane = [Plane::Xy, Plane::Zx, Plane::Yz][(int - 17) as usize];
+                            G_PLANE
+                        }
+                        90 | 91 if mantissa == 0 => {
+                            self.absolute = int == 90;
+                            G_DISTANCE
+                        }
+                        90 | 91 => {
+                            // G91.1 (arc centres incremental, as always)
+                            if mantissa != 10 || int == 90 {
+                                return refuse(20, format!("unsupported command G{value}"));
+                            }
+                            mantissa = 0;
+                            G_ARC_DISTANCE
+                        }
+                        93 | 94 => {
+                            self.inverse_time = int == 93;
+                            G_FEED_MODE
+                        }
+                        20 | 21 => {
+                            self.inches = int == 20;
+                            G_UNITS
+                        }
+                        40 => G_CUTTER,
+                        43 | 49 => {
+                            claim(&mut axis_command, AxisCommand::ToolLength)?;
+                            if int == 49 {
+                                tool_length = Some(false);
+                            } else if mantissa == 10 {
+                                tool_length = Some(true);
+                            } else {
+                                return refuse(20, format!("unsupported command G{value}"));
+                            }
+                            mantissa = 0;
+                            G_TOOL_LENGTH
+                        }
+                        54..=59 => {
+                            self.coord = (int - 54) as usize;
+                            G_COORD
+                        }
+                        61 => {
+                            if mantissa != 0 {
+                                return refuse(20, format!("unsupported command G{value}"));
+                            }
+                            G_PATH
+                        }
+                        _ => return refuse(20, format!("unsupported command G{value}")),
+                    };
+                    if mantissa > 0 {
+                        return refuse(23, format!("G{value} needs an integer"));
+                    }
+                    if groups & group != 0 {
+                        return refuse(21, format!("G{value}: two commands of one modal group"));
+                    }
+                    groups |= group;
                 }
-                ('M', 5) => {
-                    self.spindle = None;
-                    step.sync = true;
+                'M' => {
+                    if mantissa > 0 {
+                        return refuse(23, format!("M{value} needs an integer"));
+                    }
+                    let group = match int {
+                        0 | 1 | 2 | 30 => {
+                            // M1, the optional stop, is ignored
+                            if int != 1 {
+                                flow = Some(int as u8);
+                            }
+                            M_FLOW
+                        }
+                        3 | 4 => {
+                            self.spindle = Some(int as u8);
+                            M_SPINDLE
+                        }
+                        5 => {
+                            self.spindle = None;
+                            M_SPINDLE
+                        }
+                        // M7 (mist) is not in GRBL's default build
+                        8 => {
+                            self.coolant.1 = true;
+                            M_COOLANT
+                        }
+                        9 => {
+                            self.coolant = (false, false);
+                            M_COOLANT
+                        }
+                        _ => return refuse(20, format!("unsupported command M{value}")),
+                    };
+                    if groups & group != 0 {
+                        return refuse(21, format!("M{value}: two commands of one modal group"));
+                    }
+                    groups |= group;
                 }
-                ('M', 0) if v == 0.0 => {
-                    step.pause = true;
-                    step.sync = true;
+                c if VALUE_WORDS.contains(c) => {
+                    if c == 'T' && value > MAX_TOOL_NUMBER {
+                        return refuse(38, format!("tool number T{value} exceeds 255"));
+                    }
+                    if seen & bit(c) != 0 {
+                        return refuse(25, format!("word {c} repeated"));
+                    }
+                    if "FNPTS".contains(c) && value < 0.0 {
+                        return refuse(4, format!("negative value {c}{value}"));
+                    }
+                    seen |= bit(c);
+                    val[c as usize - 'A' as usize] = match c {
+                        'L' | 'T' => int as u8 as f64,
+                        'N' => value.trunc(),
+                        _ => value,
+                    };
                 }
-                ('M', 7) => {
-                    self.coolant.0 = true;
-                    step.sync = true;
-                }
-                ('M', 8) => {
-                    self.coolant.1 = true;
-                    step.sync = true;
-                }
-                ('M', 9) => {
-                    self.coolant = (false, false);
-                    step.sync = true;
-                }
-                ('G', 80) => self.motion = NO_MOTION,
-                ('M', _) => step.sync = true,
-                _ => {}
+                _ => return refuse(20, format!("unsupported word {c}{value}")),
             }
         }
-        if let Some(t) = get('T') {
-            if t < 0.0 {
-                return refuse(4, format!("negative tool number T{t}"));
-            }
-            if t > 255.0 {
-                return refuse(38, format!("tool number T{t} exceeds 255"));
-            }
-            self.tool = t as u32;
-        }
-        if let Some(s) = get('S') {
-            if s < 0.0 {
-                return refuse(4, format!("negative spindle speed S{s}"));
-            }
-            step.sync |= self.spindle.is_some() && s != self.speed;
-            self.speed = s;
-        }
-        let scale = self.scale();
-        if let Some(f) = get('F') {
-            if f <= 0.0 {
-                return refuse(4, format!("feed rate F{f} must be positive"));
-            }
-            self.feed = Some(f * scale);
-        }
-        if dwell {
-            let Some(p) = get('P') else {
-                return refuse(28, "G4 needs a P word (seconds)".into());
-            };
-            if p < 0.0 {
-                return refuse(4, format!("negative dwell P{p}"));
-            }
-            step.dwell = Some(p);
-            step.sync = true;
-            return Ok(step);
-        }
-        if let Some(m) = new_motion {
-            self.motion = m;
-        }
-        let axes = ['X', 'Y', 'Z'].map(get);
-        if axes.iter().all(Option::is_none) {
-            if new_motion.is_some_and(|m| (2..=3).contains(&m)) {
-                return refuse(26, "arc without an end point".into());
-            }
-            return Ok(step);
-        }
-        if self.motion == NO_MOTION {
-            return refuse(31, "axis words with no motion mode (after G80)".into());
-        }
-        if self.motion >= 1 && self.feed.is_none() {
-            return refuse(22, "feed move with no feed rate set (F)".into());
-        }
-        let mut to = self.pos;
-        for (k, v) in axes.iter().enumerate() {
-            if let Some(v) = v {
-                to[k] = if self.absolute {
-                    v * scale
+        if let Some(code) = l.bad {
+            return refuse(
+                code,
+                if code == 1 {
+                    "expected a word's letter"
                 } else {
-                    to[k] + v * scale
-                };
+                    "a word without a valid number"
+                },
+            );
+        }
+        // step 3: check the block
+        let has = |c: char| seen & bit(c) != 0;
+        let v = |c: char| val[c as usize - 'A' as usize];
+        let mut unused = seen;
+        let present = ['X', 'Y', 'Z'].map(has);
+        let axis_words = present.iter().any(|&p| p);
+        if axis_words && axis_command == AxisCommand::None {
+            axis_command = AxisCommand::Motion;
+        }
+        if has('N') && v('N') > MAX_LINE_NUMBER {
+            return refuse(27, format!("line number N{} too large", v('N')));
+        }
+        let scale = if self.inches { 25.4 } else { 1.0 };
+        // the feed rate (0 = undefined)
+        let f = if jog {
+            if !has('F') {
+                return refuse(22, "a jog needs its F word");
+            }
+            v('F') * scale
+        } else if self.inverse_time {
+            if axis_command == AxisCommand::Motion
+                && self.motion != NO_MOTION
+                && self.motion != 0
+                && !has('F')
+            {
+                return refuse(22, "G93 needs an F word on every feed move");
+            }
+            v('F')
+        } else if !old.inverse_time {
+            if has('F') {
+                v('F') * scale
+            } else {
+                old.feed.unwrap_or(0.0)
+            }
+        } else {
+            // (GRBL takes F as given when leaving G93)
+            v('F')
+        };
+        let speed = if has('S') { v('S') } else { old.speed };
+        if non_modal == Some(4) {
+            if !has('P') {
+                return refuse(28, "G4 needs a P word (seconds)");
+            }
+            unused &= !bit('P');
+        }
+        let (a0, a1, _) = self.plane.axes();
+        let mut xyz = ['X', 'Y', 'Z'].map(|c| v(c) * scale);
+        if axis_command == AxisCommand::ToolLength
+            && tool_length == Some(true)
+            && present != [false, false, true]
+        {
+            return refuse(37, "G43.1 takes a Z word only");
+        }
+        let block_coord = self.stored.wcs[self.coord];
+        let tlo = DVec3::new(0.0, 0.0, old.tlo);
+        let mut g10: Option<(usize, DVec3)> = None;
+        let mut g92: Option<DVec3> = None;
+        let mut home: Option<DVec3> = None;
+        match non_modal {
+            Some(10) => {
+                if !axis_words {
+                    return refuse(26, "G10 without axis words");
+                }
+                if !has('P') && !has('L') {
+                    return refuse(28, "G10 needs L and P words");
+                }
+                let p = v('P').trunc();
+                if p > N_COORD_SYSTEMS {
+                    return refuse(29, format!("no coordinate system P{p}"));
+                }
+                let l20 = v('L') == 20.0;
+                if !l20 && (v('L') != 2.0 || has('R')) {
+                    return refuse(20, format!("unsupported G10 L{}", v('L')));
+                }
+                unused &= !(bit('L') | bit('P'));
+                let idx = if p > 0.0 { p as usize - 1 } else { self.coord };
+                let mut data = self.stored.wcs[idx];
+                for k in (0..3).filter(|&k| present[k]) {
+                    data[k] = if l20 {
+                        old.pos[k] - old.g92[k] - xyz[k] - tlo[k]
+                    } else {
+                        xyz[k]
+                    };
+                }
+                g10 = Some((idx, data));
+            }
+            Some(92) => {
+                if !axis_words {
+                    return refuse(26, "G92 without axis words");
+                }
+                let mut o = old.g92;
+                for k in (0..3).filter(|&k| present[k]) {
+                    o[k] = old.pos[k] - block_coord[k] - xyz[k] - tlo[k];
+                }
+                g92 = Some(o);
+            }
+            _ => {
+                if axis_command != AxisCommand::ToolLength && axis_words {
+                    for k in 0..3 {
+                        xyz[k] = if !present[k] {
+                            old.pos[k]
+                        } else if non_modal == Some(53) {
+                            xyz[k]
+                        } else if self.absolute {
+                            xyz[k] + block_coord[k] + old.g92[k] + tlo[k]
+                        } else {
+                            xyz[k] + old.pos[k]
+                        };
+                    }
+                }
+                match non_modal {
+                    Some(28) | Some(30) => {
+                        let mut h = if non_modal == Some(28) {
+                            self.stored.g28
+                        } else {
+                            self.stored.g30
+                        };
+                        if axis_words {
+                            for k in (0..3).filter(|&k| !present[k]) {
+                                h[k] = old.pos[k];
+                            }
+                        } else {
+                            axis_command = AxisCommand::None;
+                        }
+                        home = Some(h);
+                    }
+                    Some(53) if self.motion != 0 && self.motion != 1 => {
+                        return refuse(30, "G53 needs G0 or G1");
+                    }
+                    _ => {}
+                }
             }
         }
-        step.relative = !self.absolute;
-        step.motion = self.motion;
-        if self.motion == 2 || self.motion == 3 {
-            let ijk = ['I', 'J', 'K'].map(|c| get(c).map(|v| v * scale));
-            let r = get('R').map(|v| v * scale);
-            if r.is_some() && ijk.iter().any(Option::is_some) {
-                return refuse(36, "arc with both I/J/K offsets and R".into());
+        let target = DVec3::from_array(xyz);
+        // the motion modes
+        if self.motion == NO_MOTION {
+            if axis_words {
+                return refuse(31, "axis words with no motion mode (after G80)");
             }
-            let (a0, a1, _) = self.plane.axes();
-            let in_plane = axes[a0].is_some() || axes[a1].is_some();
-            match arc::setup(self.plane, self.motion == 2, self.pos, to, ijk, r, in_plane) {
-                Ok(a) => step.arc = Some(a),
-                Err((code, what)) => return refuse(code, what),
+        } else if axis_command == AxisCommand::Motion {
+            if self.motion == 0 {
+                if !axis_words {
+                    axis_command = AxisCommand::None;
+                }
+            } else {
+                if f == 0.0 {
+                    return refuse(22, "feed move with no feed rate set (F)");
+                }
+                match self.motion {
+                    1 if !axis_words => axis_command = AxisCommand::None,
+                    2 | 3 => {
+                        if !axis_words {
+                            return refuse(26, "arc without an end point");
+                        }
+                        let r = has('R').then(|| v('R') * scale);
+                        let ijk = if r.is_some() {
+                            unused &= !bit('R');
+                            [None; 3]
+                        } else {
+                            unused &= !(bit('I') | bit('J') | bit('K'));
+                            ['I', 'J', 'K'].map(|c| has(c).then(|| v(c) * scale))
+                        };
+                        let in_plane = present[a0] || present[a1];
+                        match arc::setup(
+                            self.plane,
+                            self.motion == 2,
+                            old.pos,
+                            target,
+                            ijk,
+                            r,
+                            in_plane,
+                        ) {
+                            Ok(a) => step.arc = Some(a),
+                            Err((code, what)) => return refuse(code, what),
+                        }
+                    }
+                    m if m >= PROBE_TOWARD => {
+                        if !axis_words {
+                            return refuse(26, "a probe without axis words");
+                        }
+                        if target == old.pos {
+                            return refuse(33, "a probe to where the tool is");
+                        }
+                        let k = m - PROBE_TOWARD;
+                        step.probe = Some(Probe {
+                            away: k >= 2,
+                            must_touch: k % 2 == 0,
+                        });
+                        // GRBL runs a probe alone, after the moves before
+                        // it, and answers when it has ended
+                        step.sync = true;
+                    }
+                    _ => {}
+                }
             }
         }
-        step.to = Some(to);
-        self.pos = to;
+        // words nothing used
+        unused &= !(bit('N') | bit('F'));
+        if !jog {
+            unused &= !(bit('S') | bit('T'));
+        }
+        if axis_command != AxisCommand::None {
+            unused &= !(bit('X') | bit('Y') | bit('Z'));
+        }
+        if unused != 0 {
+            let words: String = VALUE_WORDS
+                .chars()
+                .filter(|&c| unused & bit(c) != 0)
+                .collect();
+            return refuse(36, format!("words {words} unused"));
+        }
+        if jog {
+            if groups & !(G_DISTANCE | G_UNITS | G_NON_MODAL) != 0
+                || !matches!(non_modal, None | Some(53))
+            {
+                return refuse(16, "a jog takes only G20/G21, G90/G91 and G53");
+            }
+            step.jog = true;
+            if axis_command != AxisCommand::None {
+                step.motion = 1;
+                step.to = Some(target);
+                self.pos = target;
+            }
+            return Ok(step);
+        }
+        // step 4: execute, in GRBL's order
+        self.feed = (f > 0.0).then_some(f);
+        if speed != old.speed {
+            step.sync |= old.spindle.is_some();
+            self.speed = speed;
+        }
+        self.tool = if has('T') { v('T') as u32 } else { 0 };
+        step.sync |= self.spindle != old.spindle || self.coolant != old.coolant;
+        if non_modal == Some(4) {
+            step.dwell = Some(v('P'));
+            step.sync = true;
+        }
+        if let Some(on) = tool_length {
+            self.tlo_on = on;
+            self.tlo = if on { xyz[2] } else { 0.0 };
+        }
+        if let Some((idx, data)) = g10 {
+            self.stored.wcs[idx] = data;
+        }
+        match non_modal {
+            Some(28) | Some(30) => {
+                let h = home.unwrap_or(old.pos);
+                if axis_command != AxisCommand::None {
+                    step.via = Some(target);
+                }
+                step.motion = 0;
+                step.to = Some(h);
+                self.pos = h;
+            }
+            Some(38) => self.stored.g28 = old.pos,
+            Some(40) => self.stored.g30 = old.pos,
+            Some(92) => self.g92 = g92.unwrap_or(old.g92),
+            Some(102) => self.g92 = DVec3::ZERO,
+            _ => {}
+        }
+        if self.motion != NO_MOTION && axis_command == AxisCommand::Motion {
+            step.motion = self.motion;
+            step.to = Some(target);
+            step.relative = !self.absolute;
+            self.pos = target;
+        }
+        match flow {
+            Some(0) => {
+                step.pause = true;
+                step.sync = true;
+            }
+            Some(_) => {
+                // M2/M30: these modes go back to their defaults
+                step.end = true;
+                step.sync = true;
+                self.motion = 1;
+                self.plane = Plane::Xy;
+                self.absolute = true;
+                self.inverse_time = false;
+                self.coord = 0;
+                self.spindle = None;
+                self.coolant = (false, false);
+            }
+            None => {}
+        }
         Ok(step)
     }
 }
@@ -236,7 +690,7 @@ mod tests {
     use crate::gcode::parse::parse_line;
 
     fn fold(m: &mut Modal, s: &str) -> Result<Step, Refusal> {
-        m.apply(&parse_line(s, 1).unwrap())
+        m.apply(&parse_line(s, 1))
     }
 
     #[test]

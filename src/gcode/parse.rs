@@ -1,5 +1,10 @@
-//! One G-code reader for the simulator and the sender: words, comments and
-//! line numbers of the GRBL 1.1 subset relievo speaks, any case and spacing.
+//! One G-code reader for the simulator, the simulated GRBL and the sender:
+//! a line read as GRBL 1.1's protocol and parser read it. Comments, spaces,
+//! control characters and the block-delete '/' are dropped, letters taken
+//! in any case; words are read in order, each a letter and a number, until
+//! one is not: the line then carries GRBL's code for that word (1, no
+//! letter; 2, no number) and what GRBL would refuse first is for the modal
+//! state to decide, word by word as GRBL does.
 
 use crate::bail;
 use crate::error::Result;
@@ -11,111 +16,114 @@ pub struct Line {
     pub words: Vec<(char, f64)>,
     /// Text of the comments on the line (without delimiters).
     pub comments: Vec<String>,
+    /// GRBL's error for the word after the last one read, if reading
+    /// stopped there: 1 (expected a letter) or 2 (bad number).
+    pub bad: Option<u32>,
 }
-
-/// The G codes relievo reads: motion, dwell, the arc planes, units,
-/// distance modes, feed per minute, and what other CAM programs' GRBL
-/// posts put in their preambles with no effect here (G40 cutter
-/// compensation off, G49 tool length offset off while none is set, G54
-/// while its offset is zero, G61 exact path, G80 motion off, G91.1).
-const G_CODES: [f64; 19] = [
-    0.0, 1.0, 2.0, 3.0, 4.0, 17.0, 18.0, 19.0, 20.0, 21.0, 40.0, 49.0, 54.0, 61.0, 80.0, 90.0,
-    91.0, 91.1, 94.0,
-];
-/// Program stops, spindle, coolant.
-const M_CODES: [f64; 10] = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 7.0, 8.0, 9.0, 30.0];
 
 /// Remove comments and whitespace: what GRBL's line buffer will hold.
 pub fn strip(line: &str) -> String {
-    let mut out = String::with_capacity(line.len());
-    let mut depth = 0;
-    for c in line.chars() {
-        match c {
-            '(' => depth += 1,
-            ')' if depth > 0 => depth -= 1,
-            ';' if depth == 0 => break,
-            c if depth == 0 && !c.is_whitespace() => out.push(c.to_ascii_uppercase()),
-            _ => {}
-        }
-    }
-    out
+    split(line).0
 }
 
-/// Parse one line (`number` only names it in errors).
-pub fn parse_line(text: &str, number: usize) -> Result<Line> {
-    let mut words = Vec::new();
-    let mut comments = Vec::new();
-    let b = text.as_bytes();
-    let mut i = 0;
+/// What GRBL's line buffer holds and the comments' texts.
+fn split(line: &str) -> (String, Vec<String>) {
+    let mut out = String::with_capacity(line.len());
+    let mut comments: Vec<String> = Vec::new();
+    let mut chars = line.chars();
+    while let Some(c) = chars.next() {
+        match c {
+            // GRBL ends a '(' comment at ')' or the line's end
+            '(' => comments.push(chars.by_ref().take_while(|&d| d != ')').collect()),
+            ';' => {
+                comments.push(chars.by_ref().collect());
+                break;
+            }
+            '/' => {}
+            c if c <= ' ' => {}
+            c => out.push(c.to_ascii_uppercase()),
+        }
+    }
+    for c in &mut comments {
+        *c = c.trim().to_string();
+    }
+    (out, comments)
+}
+
+/// GRBL's read_float: an optional sign, then digits with at most one
+/// point, at least one digit; where the number ends.
+fn read_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
+    let start = i;
+    if i < b.len() && (b[i] == b'-' || b[i] == b'+') {
+        i += 1;
+    }
+    let (mut digits, mut point) = (0, false);
     while i < b.len() {
-        let c = b[i];
-        if c == b'(' {
-            let Some(end) = b[i..].iter().position(|&d| d == b')') else {
-                bail!("line {number}: comment '(' is not closed");
-            };
-            comments.push(text[i + 1..i + end].trim().to_string());
-            i += end + 1;
-            continue;
-        }
-        if c == b';' {
-            comments.push(text[i + 1..].trim().to_string());
-            break;
-        }
-        if c.is_ascii_whitespace() || (c == b'%' && words.is_empty()) {
-            i += 1;
-            continue;
-        }
-        let letter = c.to_ascii_uppercase() as char;
-        if !letter.is_ascii_alphabetic() {
-            let bad = text[i..].chars().next().unwrap_or('?');
-            bail!(
-                "line {number}: unexpected character '{bad}' in '{}'",
-                text.trim()
-            );
+        match b[i] {
+            b'0'..=b'9' => digits += 1,
+            b'.' if !point => point = true,
+            _ => break,
         }
         i += 1;
-        let start = i;
-        let mut spaced = false;
-        while i < b.len()
-            && (b[i].is_ascii_digit() || matches!(b[i], b'.' | b'-' | b'+' | b' ' | b'\t'))
-        {
-            spaced |= b[i] == b' ' || b[i] == b'\t';
-            i += 1;
-        }
-        let raw = &text[start..i];
-        let num: std::borrow::Cow<str> = if spaced {
-            raw.split_whitespace().collect::<String>().into()
-        } else {
-            raw.into()
-        };
-        let value: f64 = match num.parse() {
-            Ok(v) if f64::is_finite(v) => v,
-            _ => bail!(
-                "line {number}: word '{letter}' has no valid number in '{}'",
-                text.trim()
-            ),
-        };
-        match letter {
-            'G' if !G_CODES.contains(&value) => bail!("line {number}: unsupported command G{num}"),
-            'M' if !M_CODES.contains(&value) => bail!("line {number}: unsupported command M{num}"),
-            'G' | 'M' | 'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'F' | 'S' | 'P' | 'N' | 'T' => {}
-            _ => bail!("line {number}: unsupported word '{letter}{num}'"),
-        }
-        words.push((letter, value));
     }
-    Ok(Line {
+    if digits == 0 {
+        return None;
+    }
+    let v: f64 = std::str::from_utf8(&b[start..i]).ok()?.parse().ok()?;
+    Some((v, i))
+}
+
+/// Read one line (`number` names it).
+pub fn parse_line(text: &str, number: usize) -> Line {
+    let (stripped, comments) = split(text);
+    let b = stripped.as_bytes();
+    let mut words = Vec::new();
+    let mut bad = None;
+    let mut i = 0;
+    while i < b.len() {
+        let letter = b[i];
+        if !letter.is_ascii_uppercase() {
+            bad = Some(1);
+            break;
+        }
+        match read_number(b, i + 1) {
+            Some((v, next)) => {
+                words.push((letter as char, v));
+                i = next;
+            }
+            None => {
+                bad = Some(2);
+                break;
+            }
+        }
+    }
+    Line {
         number,
         words,
         comments,
-    })
+        bad,
+    }
 }
 
-/// Parse a whole program; the first bad line is the error.
+/// Parse a whole program and fold it through GRBL's modal state; the
+/// first line GRBL would refuse is the error, with its code.
 pub fn parse(text: &str) -> Result<Vec<Line>> {
-    text.lines()
-        .enumerate()
-        .map(|(k, l)| parse_line(l, k + 1))
-        .collect()
+    let mut m = super::modal::Modal::new(glam::DVec3::ZERO);
+    let mut out = Vec::new();
+    for (k, l) in text.lines().enumerate() {
+        let line = parse_line(l, k + 1);
+        if let Err(r) = m.apply(&line) {
+            bail!(
+                "line {}: error:{} ({}) in '{}'",
+                k + 1,
+                r.code,
+                r.what,
+                l.trim()
+            );
+        }
+        out.push(line);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -124,7 +132,7 @@ mod tests {
 
     #[test]
     fn words_comments_case_and_spacing() {
-        let l = parse_line("n10 g1x1.5 Y -2 (cut) z-0.25 F 600 ; tail", 3).unwrap();
+        let l = parse_line("n10 g1x1.5 Y -2 (cut) z-0.25 F 600 ; tail", 3);
         assert_eq!(
             l.words,
             vec![
@@ -142,13 +150,28 @@ mod tests {
 
     #[test]
     fn errors_name_the_line() {
-        assert!(parse("G1 X1\nG1 Q5\n").unwrap_err().0.contains("line 2"));
-        assert!(parse("G1 X1\n\nG38.2 Z-5\n")
+        assert!(parse("G0 X1\nG1 Q5 F1\n")
             .unwrap_err()
             .0
-            .contains("line 3"));
-        assert!(parse("G1 X(oops\n").unwrap_err().0.contains("line 1"));
-        assert!(parse("G1 X--1\n").unwrap_err().0.contains("line 1"));
+            .contains("line 2: error:20"));
+        assert!(parse("G0 X1\n\nG1 X2\n")
+            .unwrap_err()
+            .0
+            .contains("line 3: error:22"));
+        // GRBL ends a comment at the line's end
+        assert_eq!(parse_line("G1 X1 (open", 1).words.len(), 2);
+        assert!(parse("G1 X(oops\n")
+            .unwrap_err()
+            .0
+            .contains("line 1: error:2"));
+        assert!(parse("G1 X--1\n")
+            .unwrap_err()
+            .0
+            .contains("line 1: error:2"));
+        assert!(parse("G1 X1 %\n")
+            .unwrap_err()
+            .0
+            .contains("line 1: error:1"));
         assert!(parse("M6\n").unwrap_err().0.contains("M6"));
     }
 }

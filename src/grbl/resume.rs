@@ -209,21 +209,30 @@ impl Tracker {
 /// units, distance mode, spindle, up to the job's safe height, over the
 /// point, down at the plunge feed, then the job's feed.
 pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
-    let parsed = |l: &JobLine| parse_line(&l.text, l.number).ok();
+    let parsed = |l: &JobLine| parse_line(&l.text, l.number);
     let top = lines
         .iter()
-        .filter_map(parsed)
+        .map(parsed)
         .flat_map(|p| p.words.into_iter().filter(|w| w.0 == 'Z'))
         .fold(0.0f64, |t, w| t.max(w.1));
     let mut m = Modal::new(DVec3::ZERO);
-    for p in lines[..from].iter().filter_map(parsed) {
+    for p in lines[..from].iter().map(parsed) {
         // a line GRBL would refuse changes nothing there either
         let _ = m.apply(&p);
     }
-    let pos = m.pos;
+    // in the job's work coordinates, its coordinate system and tool
+    // length offset restored first (a reset keeps the former, not the
+    // latter)
+    let pos = m.pos - m.wco();
     let safe = top.max(pos.z).max(5.0);
     let n = |v: f64| crate::gcode::emit::num(v);
     let mut out = vec!["G21G90".to_string()];
+    if m.coord != 0 {
+        out.push(format!("G{}", 54 + m.coord));
+    }
+    if m.tlo_on {
+        out.push(format!("G43.1Z{}", n(m.tlo)));
+    }
     if let Some(dir) = m.spindle {
         out.push(format!("M{dir}S{}", n(m.speed)));
         out.push("G4P2".into());

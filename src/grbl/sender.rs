@@ -84,9 +84,7 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
                 s.len()
             );
         }
-        let step = parse_line(&s, k + 1)
-            .ok()
-            .and_then(|p| modal.apply(&p).ok());
+        let step = modal.apply(&parse_line(&s, k + 1)).ok();
         let travel = step.as_ref().map_or(0.0, |st| match st.to {
             Some(_) if st.motion >= 2 => f64::INFINITY,
             Some(to) => (to - st.from).abs().max_element(),
@@ -420,9 +418,9 @@ struct Item<'a> {
 
 /// Seconds of G4 dwell in a preamble line.
 fn dwell_of(text: &str) -> f64 {
-    parse_line(text, 0)
+    Modal::new(DVec3::ZERO)
+        .apply(&parse_line(text, 0))
         .ok()
-        .and_then(|l| Modal::new(DVec3::ZERO).apply(&l).ok())
         .and_then(|s| s.dwell)
         .unwrap_or(0.0)
 }

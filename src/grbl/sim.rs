@@ -6,7 +6,7 @@
 //! the port that carries its bytes says what time it is.
 
 use super::{SOFT_RESET, WELCOME};
-use crate::gcode::modal::{Modal, Step};
+use crate::gcode::modal::{Modal, Probe, Step, PROBE_TOWARD};
 use crate::gcode::parse::{parse_line, strip};
 use crate::machine::Machine;
 use glam::DVec3;
@@ -40,9 +40,57 @@ pub struct Faults {
     pub garble: f64,
 }
 
+/// A touch plate lying on the work: its top `thickness` over the stock
+/// top (machine Z 0 for a tool of length 0), a square of `size` centred
+/// at (x, y) machine coordinates. A probe touches it when the tool's tip
+/// reaches its top over it.
+#[derive(Clone, Copy, Debug)]
+pub struct Plate {
+    pub thickness: f64,
+    pub x: f64,
+    pub y: f64,
+    pub size: f64,
+}
+
+impl Plate {
+    /// `THICKNESS[@X,Y]` (mm; at 0,0 by default), 50 mm square.
+    pub fn parse(s: &str) -> Result<Plate, String> {
+        let bad = || format!("'{s}': expected THICKNESS[@X,Y] in mm");
+        let (t, at) = s.split_once('@').unwrap_or((s, "0,0"));
+        let (x, y) = at.split_once(',').ok_or_else(bad)?;
+        let num = |v: &str| v.trim().parse::<f64>().ok().filter(|v| v.is_finite());
+        match (num(t), num(x), num(y)) {
+            (Some(thickness), Some(x), Some(y)) if thickness >= 0.0 => Ok(Plate {
+                thickness,
+                x,
+                y,
+                size: 50.0,
+            }),
+            _ => Err(bad()),
+        }
+    }
+
+    fn under(&self, p: DVec3) -> bool {
+        (p.x - self.x).abs() <= self.size / 2.0 && (p.y - self.y).abs() <= self.size / 2.0
+    }
+}
+
+/// A probing move under way: when it ends, where the machine stops, the
+/// `[PRB:...]` report, and its line.
+#[derive(Clone, Debug)]
+struct Probing {
+    end: f64,
+    stop: DVec3,
+    touched: Option<DVec3>,
+    must_touch: bool,
+    line: String,
+}
+
 #[derive(Clone, Debug)]
 struct Block {
     duration: f64,
+    start: DVec3,
+    rapid: bool,
     end: DVec3,
     /// Its line, and the lines without motion that GRBL took after it:
     /// they count as executed when the move completes.
@@ -99,6 +147,20 @@ pub struct SimGrbl {
     last_dir: Option<DVec3>,
     last_exit: f64,
     rng: u64,
+    /// The touch plate, if one lies on the work.
+    pub plate: Option<Plate>,
+    /// Length of each tool in turn (mm; the tip is this far below where a
+    /// tool of length 0 would be): the next one goes in at each M0.
+    pub tool_lengths: Vec<f64>,
+    tool: usize,
+    probing: Option<Probing>,
+    /// The last probe's trigger point (machine) and whether it touched.
+    probed: (DVec3, bool),
+    /// Every completed move as the tool's tip went (machine coordinates
+    /// less the tool's length): (from, to, rapid).
+    pub tips: Vec<(DVec3, DVec3, bool)>,
+    /// The work offset last reported, and status reports since.
+    wco_said: (DVec3, usize),
 }
 
 impl SimGrbl {
@@ -138,6 +200,13 @@ impl SimGrbl {
             last_dir: None,
             last_exit: 0.0,
             rng: 0x9e3779b97f4a7c15,
+            plate: None,
+            tool_lengths: Vec::new(),
+            tool: 0,
+            probing: None,
+            probed: (DVec3::ZERO, false),
+            tips: Vec::new(),
+            wco_said: (DVec3::ZERO, 0),
         };
         s.say(&format!("\r\n{WELCOME}"));
         s
@@ -165,6 +234,7 @@ impl SimGrbl {
         [
             self.block_due(),
             self.dwell.as_ref().map(|d| d.0),
+            self.probing.as_ref().map(|p| p.end),
             self.faults.chatty.then_some(self.next_chatter),
         ]
         .into_iter()
@@ -181,6 +251,8 @@ impl SimGrbl {
             self.now = at;
             if self.block_due().is_some_and(|e| e <= at) {
                 let b = self.planner.pop_front().unwrap();
+                let tip = self.tip();
+                self.tips.push((b.start - tip, b.end - tip, b.rapid));
                 self.done = b.end;
                 self.log.extend(b.lines);
                 if let Some(next) = self.planner.front() {
@@ -191,6 +263,9 @@ impl SimGrbl {
                 let (_, line) = self.dwell.take().unwrap();
                 self.log.push(line);
                 self.say("ok");
+            }
+            if self.probing.as_ref().is_some_and(|p| p.end <= at) {
+                self.end_probe();
             }
             if self.faults.chatty && self.next_chatter <= at {
                 self.next_chatter = at + 0.1;
@@ -233,6 +308,10 @@ impl SimGrbl {
                     self.block_end = self.now + left;
                 }
                 if std::mem::take(&mut self.paused) {
+                    // the operator changed the tool while it held
+                    if self.tool + 1 < self.tool_lengths.len() {
+                        self.tool += 1;
+                    }
                     if let Some(b) = self.planner.front() {
                         self.block_end = self.now + b.duration;
                     }
@@ -267,8 +346,9 @@ impl SimGrbl {
         self.paused = false;
         self.waiting = None;
         self.dwell = None;
+        self.probing = None;
         self.check = false;
-        self.modal = Modal::new(self.done);
+        self.modal = self.modal.after_reset(self.done);
         self.spindle = 0.0;
         if moving {
             self.alarm = Some(3);
@@ -287,21 +367,21 @@ impl SimGrbl {
         self.reset();
     }
 
-    fn status(&self) -> String {
+    fn status(&mut self) -> String {
         let state = if self.alarm.is_some() {
             "Alarm"
         } else if self.held_left.is_some() || self.stuck || self.paused {
             "Hold:0"
         } else if self.check {
             "Check"
-        } else if !self.planner.is_empty() {
+        } else if !self.planner.is_empty() || self.probing.is_some() {
             "Run"
         } else {
             "Idle"
         };
         let p = self.done;
-        format!(
-            "<{state}|MPos:{:.3},{:.3},{:.3}|Bf:{},{}|FS:{},{}>",
+        let mut s = format!(
+            "<{state}|MPos:{:.3},{:.3},{:.3}|Bf:{},{}|FS:{},{}",
             p.x,
             p.y,
             p.z,
@@ -309,7 +389,101 @@ impl SimGrbl {
             self.rx_size - self.rx.len(),
             self.modal.feed.unwrap_or(0.0).round(),
             self.spindle.round()
+        );
+        // as GRBL: the work offset when it changed, else every tenth report
+        let wco = self.modal.wco();
+        if wco != self.wco_said.0 || self.wco_said.1 >= 9 {
+            s.push_str(&format!("|WCO:{}", triple(wco)));
+            self.wco_said = (wco, 0);
+        } else {
+            self.wco_said.1 += 1;
+        }
+        s.push('>');
+        s
+    }
+
+    /// Where the tip is below the spindle: the current tool's length.
+    fn tip(&self) -> DVec3 {
+        DVec3::new(
+            0.0,
+            0.0,
+            self.tool_lengths.get(self.tool).copied().unwrap_or(0.0),
         )
+    }
+
+    /// A probing move from `from` toward `to` at the modal feed: where
+    /// the tip meets the plate's top (or, away, leaves it), and where the
+    /// machine stops, decelerating from the probe feed past the trigger.
+    fn start_probe(&mut self, from: DVec3, to: DVec3, probe: Probe, line: String) {
+        let tip = self.tip();
+        let top = self.plate.map(|p| p.thickness);
+        let contact = |q: DVec3| {
+            self.plate
+                .is_some_and(|p| p.under(q) && q.z - tip.z <= p.thickness + 1e-9)
+        };
+        if contact(from) != probe.away {
+            // already touching (or, away, not touching): GRBL refuses
+            self.raise(4);
+            return self.say("ok");
+        }
+        let d = to - from;
+        let len = d.length();
+        let u = d / len;
+        // the trigger: the tip crossing the plate's top over the plate
+        let touched = top.and_then(|t| {
+            let z0 = from.z - tip.z - t;
+            let z1 = to.z - tip.z - t;
+            if (z0 > 0.0) == (z1 > 0.0) || z0 == z1 {
+                return None;
+            }
+            let q = from + d * (z0 / (z0 - z1));
+            (contact(q) != probe.away || self.plate.is_some_and(|p| p.under(q))).then_some(q)
+        });
+        let feed = self.modal.feed.unwrap_or(1.0) / 60.0;
+        let a = (0..3)
+            .filter(|&k| u[k] != 0.0)
+            .map(|k| self.accel[k] / u[k].abs())
+            .fold(f64::INFINITY, f64::min);
+        let stop = match touched {
+            Some(q) => {
+                let run = (q - from).length();
+                let over = (feed * feed / (2.0 * a)).min(len - run);
+                from + u * (run + over)
+            }
+            None => to,
+        };
+        let dist = (stop - from).length();
+        let duration = dist / feed + feed / a;
+        self.probing = Some(Probing {
+            end: self.now + duration,
+            stop,
+            touched,
+            must_touch: probe.must_touch,
+            line,
+        });
+    }
+
+    /// The probing move has ended: report, or raise ALARM:5 when a G38.2
+    /// or G38.4 met nothing.
+    fn end_probe(&mut self) {
+        let Some(p) = self.probing.take() else { return };
+        let tip = self.tip();
+        self.tips.push((self.done - tip, p.stop - tip, false));
+        self.done = p.stop;
+        self.modal.pos = p.stop;
+        self.probed = (p.touched.unwrap_or(p.stop), p.touched.is_some());
+        if p.touched.is_none() && p.must_touch {
+            self.raise(5);
+            return;
+        }
+        let r = format!(
+            "[PRB:{}:{}]",
+            triple(self.probed.0),
+            u8::from(self.probed.1)
+        );
+        self.say(&r);
+        self.log.push(p.line);
+        self.say("ok");
     }
 
     fn say(&mut self, line: &str) {
@@ -338,7 +512,7 @@ impl SimGrbl {
     /// the planner to empty), as GRBL's main loop does.
     fn pump(&mut self) {
         loop {
-            if self.dwell.is_some() {
+            if self.dwell.is_some() || self.probing.is_some() {
                 return;
             }
             if let Some(line) = self.waiting.take() {
@@ -401,10 +575,10 @@ impl SimGrbl {
 
     /// Whether GRBL empties its planner before acting on `line`.
     fn syncs(&self, line: &str) -> bool {
-        parse_line(line, 0)
-            .ok()
-            .and_then(|l| self.modal.clone().apply(&l).ok())
-            .is_some_and(|s| s.sync)
+        self.modal
+            .clone()
+            .apply(&parse_line(line, 0))
+            .is_ok_and(|s| s.sync)
     }
 
     /// Act on a G-code line and answer it (a dwell answers when it ends).
@@ -419,9 +593,17 @@ impl SimGrbl {
                 None => 0.0,
             };
         }
+        if step.end {
+            self.say("[MSG:Pgm End]");
+        }
         if step.pause && !self.check {
             // the moves before it are done (it synchronised): hold here
             self.paused = true;
+        }
+        if let (Some(probe), Some(to)) = (step.probe, step.to) {
+            if !self.check {
+                return self.start_probe(step.from, to, probe, line);
+            }
         }
         if let Some(p) = step.dwell.filter(|_| !self.check) {
             self.dwell = Some((self.now + p, line));
@@ -454,7 +636,17 @@ impl SimGrbl {
                                 from = *q;
                             }
                         }
-                        None => self.queue(step.from, to, line),
+                        None => {
+                            // G28/G30 by their point on the way
+                            let from = match step.via {
+                                Some(v) => {
+                                    self.queue(step.from, v, String::new());
+                                    v
+                                }
+                                None => step.from,
+                            };
+                            self.queue(from, to, line)
+                        }
                     }
                 }
             }
@@ -488,6 +680,7 @@ impl SimGrbl {
         self.held_left = None;
         self.waiting = None;
         self.dwell = None;
+        self.probing = None;
         self.modal.pos = self.done;
         // GRBL aborts into its reset on an alarm: spindle and coolant off
         self.spindle = 0.0;
@@ -552,6 +745,8 @@ impl SimGrbl {
         }
         self.planner.push_back(Block {
             duration,
+            start: from,
+            rapid: self.modal.motion == 0,
             end: target,
             lines: if line.is_empty() { vec![] } else { vec![line] },
         });
@@ -560,12 +755,7 @@ impl SimGrbl {
     /// Fold a line into the modal state; GRBL's error code for what it
     /// refuses.
     fn interpret(&mut self, line: &str) -> Result<Step, u32> {
-        let l = match parse_line(line, 0) {
-            Ok(l) => l,
-            Err(e) if e.0.contains("unsupported") => return Err(20),
-            Err(_) => return Err(2),
-        };
-        self.modal.apply(&l).map_err(|r| r.code)
+        self.modal.apply(&parse_line(line, 0)).map_err(|r| r.code)
     }
 
     fn system(&mut self, cmd: &str) {
@@ -620,15 +810,51 @@ impl SimGrbl {
                 }
                 self.say("ok");
             }
+            "#" => {
+                let m = &self.modal;
+                let mut lines: Vec<String> = (0..6)
+                    .map(|k| format!("[G{}:{}]", 54 + k, triple(m.stored.wcs[k])))
+                    .collect();
+                lines.push(format!("[G28:{}]", triple(m.stored.g28)));
+                lines.push(format!("[G30:{}]", triple(m.stored.g30)));
+                lines.push(format!("[G92:{}]", triple(m.g92)));
+                lines.push(format!("[TLO:{:.3}]", m.tlo));
+                lines.push(format!(
+                    "[PRB:{}:{}]",
+                    triple(self.probed.0),
+                    u8::from(self.probed.1)
+                ));
+                for l in lines {
+                    self.say(&l);
+                }
+                self.say("ok");
+            }
             "G" => {
+                let m = &self.modal;
+                let motion = match m.motion {
+                    p if p >= PROBE_TOWARD => format!("38.{}", p - PROBE_TOWARD + 2),
+                    p => p.to_string(),
+                };
+                let coolant = match m.coolant {
+                    (false, false) => "M9".to_string(),
+                    (mist, flood) => [(mist, "M7"), (flood, "M8")]
+                        .iter()
+                        .filter(|c| c.0)
+                        .map(|c| c.1)
+                        .collect::<Vec<_>>()
+                        .join(" "),
+                };
                 let s = format!(
-                    "[GC:G{} G54 G17 {} {} G94 M{} M9 T0 F{} S{}]",
-                    self.modal.motion,
-                    if self.modal.inches { "G20" } else { "G21" },
-                    if self.modal.absolute { "G90" } else { "G91" },
-                    self.modal.spindle.unwrap_or(5),
-                    self.modal.feed.unwrap_or(0.0),
-                    self.modal.speed
+                    "[GC:G{motion} G{} G{} {} {} {} M{} {coolant} T{} F{} S{}]",
+                    54 + m.coord,
+                    m.plane.code(),
+                    if m.inches { "G20" } else { "G21" },
+                    if m.absolute { "G90" } else { "G91" },
+                    if m.inverse_time { "G93" } else { "G94" },
+                    m.spindle.unwrap_or(5),
+                    m.tool,
+                    m.feed.unwrap_or(0.0),
+                    m.speed
                 );
                 self.say(&s);
                 self.say("ok");
@@ -665,7 +891,7 @@ mod tests {
         let mut s = machine();
         assert_eq!(send(&mut s, "G21 G90\n"), "ok\r\n");
         assert_eq!(send(&mut s, "G1 X1\n"), "error:22\r\n");
-        assert_eq!(send(&mut s, "G38.2 Z-1 F10\n"), "error:20\r\n");
+        assert_eq!(send(&mut s, "G38.1 Z-1 F10\n"), "error:20\r\n");
         assert_eq!(send(&mut s, "$Q\n"), "error:3\r\n");
         assert_eq!(
             send(&mut s, &format!("G1X1{}\n", "0".repeat(90))),
@@ -676,6 +902,55 @@ mod tests {
         assert!(send(&mut s, "$X\n").ends_with("ok\r\n"));
         assert!(send(&mut s, "?").starts_with("<Idle|MPos:0.000,0.000,0.000|Bf:15,128"));
         assert_eq!(s.log, ["G21G90"]);
+    }
+
+    /// A touch plate 20 mm thick at (10, 10), tools 0 and 7.3 mm long:
+    /// G38.2 stops where the tip meets the plate's top (a little past it,
+    /// decelerating) and reports the trigger point; the G10 L20 that
+    /// follows sets work Z there; the second tool (after M0) touches 7.3
+    /// mm higher; a probe that meets nothing is ALARM:5.
+    #[test]
+    fn probing_a_touch_plate() {
+        let mut s = machine();
+        s.plate = Some(Plate::parse("20@10,10").unwrap());
+        s.tool_lengths = vec![0.0, 7.3];
+        let run = |s: &mut SimGrbl, text: &str, wait: f64| {
+            let mut out = send(s, text);
+            let mut t = s.now;
+            let until = t + wait;
+            while t < until && !out.contains("ok") && !out.contains("ALARM") {
+                t += 0.01;
+                s.advance(t);
+                out.push_str(&String::from_utf8_lossy(&s.take_output()));
+            }
+            out
+        };
+        run(&mut s, "G0 X10 Y10 Z30\n", 60.0);
+        let out = run(&mut s, "G38.2 Z0 F100\n", 60.0);
+        assert!(
+            out.starts_with("[PRB:10.000,10.000,20.000:1]\r\nok"),
+            "{out}"
+        );
+        // stopped past the trigger by (100/60)^2 / (2 a): the overshoot
+        let over = 20.0 - s.done.z;
+        assert!(over > 0.0 && over < 0.1, "overshoot {over}");
+        run(&mut s, "G10 L20 P0 Z20\n", 1.0);
+        assert!((s.modal.wco().z - (20.0 - over - 20.0)).abs() < 1e-9);
+        let st = send(&mut s, "?");
+        assert!(st.contains("|WCO:0.000,0.000,"), "{st}");
+        assert!(send(&mut s, "$#\n").contains("[PRB:10.000,10.000,20.000:1]"));
+        // the next tool, 7.3 mm longer, touches 7.3 mm higher
+        run(&mut s, "G0 Z40\n", 60.0);
+        run(&mut s, "M0\n", 60.0);
+        assert!(send(&mut s, "?").starts_with("<Hold"));
+        s.receive(b'~');
+        let out = run(&mut s, "G38.2 Z0 F100\n", 60.0);
+        assert!(out.contains("[PRB:10.000,10.000,27.300:1]"), "{out}");
+        // nothing under the tool: ALARM:5
+        run(&mut s, "G0 Z40\n", 60.0);
+        run(&mut s, "G0 X100 Y100\n", 60.0);
+        let out = run(&mut s, "G38.2 Z0 F500\n", 60.0);
+        assert!(out.contains("ALARM:5"), "{out}");
     }
 
     #[test]
@@ -701,4 +976,9 @@ mod tests {
         send(&mut s, &flood);
         assert!(s.overflow > 0);
     }
+}
+
+/// x,y,z as GRBL reports them.
+fn triple(p: DVec3) -> String {
+    format!("{:.3},{:.3},{:.3}", p.x, p.y, p.z)
 }
