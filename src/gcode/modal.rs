@@ -581,7 +581,7 @@ impl Modal {
                         let k = m - PROBE_TOWARD;
                         step.probe = Some(Probe {
                             away: k >= 2,
-                            must_touch: k % 2 == 0,
+                            must_touch: k.is_multiple_of(2),
                         });
                         // GRBL runs a probe alone, after the moves before
                         // it, and answers when it has ended

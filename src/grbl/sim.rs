@@ -869,6 +869,11 @@ impl SimGrbl {
     }
 }
 
+/// x,y,z as GRBL reports them.
+fn triple(p: DVec3) -> String {
+    format!("{:.3},{:.3},{:.3}", p.x, p.y, p.z)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -976,9 +981,4 @@ mod tests {
         send(&mut s, &flood);
         assert!(s.overflow > 0);
     }
-}
-
-/// x,y,z as GRBL reports them.
-fn triple(p: DVec3) -> String {
-    format!("{:.3},{:.3},{:.3}", p.x, p.y, p.z)
 }
