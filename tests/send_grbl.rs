@@ -550,3 +550,174 @@ fn an_m0_pause_holds_and_continues() {
     );
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// The job's `(tool: SPEC ...)` comments in order.
+fn tool_specs(text: &str) -> Vec<String> {
+    text.lines()
+        .filter_map(|l| l.strip_prefix("(tool: "))
+        .filter_map(|l| l.split_whitespace().next())
+        .map(str::to_string)
+        .collect()
+}
+
+/// The simulated machine's tool-tip path as a job: the header of `text`
+/// (its frame), then every move the tip made, each tool's comment where
+/// it went in.
+fn tip_job(text: &str, tips: &[relievo::grbl::sim::TipMove]) -> String {
+    let specs = tool_specs(text);
+    let mut out: String = text
+        .lines()
+        .take_while(|l| l.starts_with('('))
+        .filter(|l| !l.starts_with("(tool: "))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let n = relievo::gcode::emit::num;
+    let mut tool = usize::MAX;
+    for t in tips {
+        if t.tool != tool {
+            tool = t.tool;
+            out.push_str(&format!("(tool: {})\n", specs[tool.min(specs.len() - 1)]));
+        }
+        out.push_str(&format!(
+            "{} X{} Y{} Z{}\n",
+            if t.rapid { "G0" } else { "G1 F1000" },
+            n(t.to.x),
+            n(t.to.y),
+            n(t.to.z)
+        ));
+    }
+    out
+}
+
+/// Issue 10 acceptance 1: a roughing + finishing job whose M0 tool change
+/// puts in a tool 7.3 mm longer, streamed with `--on-pause probe` and a
+/// 20 mm touch plate on the roughing's touch-off pad: the sender pauses
+/// at the M0, probes, sets Z0 for the new tool and completes; every job
+/// line runs once, in order; the tool tip's path on the machine cuts what
+/// the job cuts, within 1 um. Without the probe the same job's finish
+/// runs 7.3 mm low, and the simulated cut of the tip's path shows it.
+#[test]
+fn a_tool_change_touches_off_on_the_plate() {
+    use relievo::grbl::sim::Plate;
+    let d = scratch("send-touchoff");
+    let path = d.join("job.nc");
+    ok(&run(&[
+        "carve",
+        "--resolution",
+        "100",
+        "--width",
+        "60",
+        "--depth",
+        "3",
+        "--safe-z",
+        "15",
+        "--machine",
+        "shapeoko",
+        "-q",
+        "-o",
+        path.to_str().unwrap(),
+    ]));
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert_eq!(tool_specs(&text).len(), 2, "roughing and finishing");
+    // the pad the roughing leaves: "(touch-off pad: 8 mm square at X.. Y.., ...)"
+    let pad = text
+        .lines()
+        .find_map(|l| l.strip_prefix("(touch-off pad: "))
+        .expect("a touch-off pad");
+    let at: Vec<f64> = pad
+        .split_whitespace()
+        .filter_map(|w| w.trim_end_matches(',').strip_prefix(['X', 'Y']))
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let plate = format!("20@{},{}", at[0], at[1]);
+    let want = grbl_lines(&text);
+    let relief = d.join("job-relief.png");
+    let job_cut = d.join("job-cut.png");
+    let job_report = simulate_report(&path, &relief, &job_cut, &["--machine", "shapeoko"]);
+    let (w, h, job_z, _) = relief_mm(&job_cut);
+    for probe in [true, false] {
+        let mut sim = SimGrbl::new(&Machine::load("shapeoko").unwrap());
+        sim.plate = Some(Plate::parse(&plate).unwrap());
+        sim.tool_lengths = vec![0.0, 7.3];
+        let mut p = MemPort::new(sim, BAUD);
+        let go = SendJob {
+            on_pause: if probe {
+                sender::OnPause::Probe
+            } else {
+                sender::OnPause::Continue
+            },
+            plate: Some(sender::TouchOff::parse(&plate).unwrap()),
+            ..job(&path)
+        };
+        if let Err(e) = go.run(&mut p, &AtomicBool::new(false)) {
+            let n = p.sim.log.len();
+            p.sim.take_output();
+            p.sim.receive(b'?');
+            eprintln!("status: {}", String::from_utf8_lossy(&p.sim.take_output()));
+            panic!(
+                "{e}\nlast lines run: {:?}",
+                &p.sim.log[n.saturating_sub(12)..]
+            );
+        }
+        finish(&mut p);
+        // every job line once, in order; the touch-off's own lines right
+        // after the M0
+        let m0 = want.iter().position(|l| l == "M0").unwrap();
+        let log = &p.sim.log;
+        let extra = log.len() - want.len();
+        assert_eq!(log[..=m0], want[..=m0]);
+        assert_eq!(log[m0 + 1 + extra..], want[m0 + 1..]);
+        if probe {
+            assert!(log[m0 + 1..m0 + 1 + extra]
+                .iter()
+                .any(|l| l.contains("G38.2")));
+        } else {
+            assert_eq!(extra, 0);
+        }
+        // the tip's path, cut by the simulator
+        let tips = d.join("tips.nc");
+        std::fs::write(&tips, tip_job(&text, &p.sim.tips)).unwrap();
+        let tips_cut = d.join("tips-cut.png");
+        let report = simulate_report(&tips, &relief, &tips_cut, &["--machine", "shapeoko"]);
+        let (tw, th, tip_z, _) = relief_mm(&tips_cut);
+        assert_eq!((tw, th), (w, h));
+        let worst = job_z
+            .iter()
+            .zip(&tip_z)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let gouge = report["max_gouge_mm"].as_f64().unwrap();
+        let finish_low = p
+            .sim
+            .tips
+            .iter()
+            .filter(|t| t.tool == 1 && !t.rapid)
+            .map(|t| t.to.z)
+            .fold(f64::INFINITY, f64::min);
+        let job_low = relievo::gcode::program(&text)
+            .unwrap()
+            .segments
+            .iter()
+            .skip_while(|s| s.line <= text.lines().position(|l| l.trim() == "M0").unwrap() + 1)
+            .map(|s| s.b.z)
+            .fold(f64::INFINITY, f64::min);
+        eprintln!(
+            "probe {probe}: {} extra lines; the tip's cut differs from the job's by up to \
+             {worst:.5} mm; gouge {gouge:.4} mm (the job alone: {:.4}); the finish's deepest \
+             tip Z {finish_low:.4} against the job's {job_low:.4}",
+            extra,
+            job_report["max_gouge_mm"].as_f64().unwrap()
+        );
+        if probe {
+            assert!(worst <= 0.001, "the tip's cut is {worst} mm off the job's");
+            assert!((finish_low - job_low).abs() <= 0.001);
+        } else {
+            assert!(((job_low - finish_low) - 7.3).abs() <= 0.001);
+            assert!(
+                gouge > 2.0,
+                "the simulator shows the cut {gouge} mm too deep"
+            );
+        }
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}

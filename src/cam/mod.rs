@@ -1537,6 +1537,11 @@ impl ToolpathJob {
         let inch = self.units == Units::In;
         let mut e = Emitter::new(&top, &ops[0].settings, inch, z_shift);
         e.arcs = self.arcs;
+        e.steps = Some(DVec3::new(
+            m.steps_per_mm.x,
+            m.steps_per_mm.y,
+            m.steps_per_mm.z,
+        ));
         let shift = plan.shift;
         for (k, op) in ops.iter().enumerate() {
             if k > 0 && op.tool != ops[k - 1].tool {

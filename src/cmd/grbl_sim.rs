@@ -35,6 +35,15 @@ pub struct GrblSimArgs {
     /// Fault: probability of noise bytes in a reply line.
     #[arg(long, default_value_t = 0.0)]
     pub garble: f64,
+    /// A touch plate on the stock: its thickness and where it lies
+    /// (machine X, Y; 50 mm square), mm.
+    #[arg(long, value_name = "THICKNESS[@X,Y]", value_parser = relievo::grbl::sim::Plate::parse)]
+    pub plate: Option<relievo::grbl::sim::Plate>,
+    /// Each tool's length in turn (the next one goes in at each M0), mm:
+    /// a job that does not touch off again after a change cuts that much
+    /// off.
+    #[arg(long, value_name = "L1,L2,...", value_delimiter = ',')]
+    pub tool_lengths: Vec<f64>,
 }
 
 pub fn parse_fault(
@@ -64,6 +73,11 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
         relievo::bail!("--speed {}: must be positive", args.speed);
     }
     let mut sim = SimGrbl::new(&m);
+    if args.tool_lengths.iter().any(|l| !l.is_finite()) {
+        relievo::bail!("--tool-lengths: give lengths in mm");
+    }
+    sim.plate = args.plate;
+    sim.tool_lengths = args.tool_lengths.clone();
     sim.faults = Faults {
         error_at: parse_fault(&args.error_at, 20, "--error-at")?,
         alarm_at: parse_fault(&args.alarm_at, 1, "--alarm-at")?,

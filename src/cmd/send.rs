@@ -39,9 +39,14 @@ pub struct SendArgs {
     /// before `send` stops the spindle and gives up.
     #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
     pub hold_limit: f64,
-    /// At an M0 (a tool change): ask on the terminal, or continue at once.
+    /// At an M0 (a tool change): ask on the terminal, continue at once,
+    /// or touch off Z on the touch plate (--plate) and continue.
     #[arg(long, value_enum, default_value = "ask")]
     pub on_pause: relievo::grbl::sender::OnPause,
+    /// The touch plate for --on-pause probe: its thickness and where it
+    /// lies (work X, Y; without it, under the tool), mm.
+    #[arg(long, value_name = "THICKNESS[@X,Y]", value_parser = relievo::grbl::sender::TouchOff::parse)]
+    pub plate: Option<relievo::grbl::sender::TouchOff>,
 }
 
 /// Ctrl-C: set by the signal handler, read by the sender.
@@ -66,7 +71,11 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         link_timeout: Some(args.link_timeout),
         hold_limit: Some(args.hold_limit),
         on_pause: args.on_pause,
+        plate: args.plate,
     };
+    if args.on_pause == relievo::grbl::sender::OnPause::Probe && args.plate.is_none() {
+        relievo::bail!("--on-pause probe: give the touch plate with --plate THICKNESS[@X,Y]");
+    }
     for (flag, v) in [
         ("--link-timeout", args.link_timeout),
         ("--hold-limit", args.hold_limit),

@@ -89,6 +89,11 @@ pub struct Emitter {
     pub arcs: bool,
     /// The arc plane last written.
     plane: Plane,
+    /// The machine's steps per mm ($100-$102): a move GRBL would plan as
+    /// no step on any axis (it drops it, going from where it stands to
+    /// the next target) is not written, so that the job judged is the
+    /// path the machine runs.
+    pub steps: Option<DVec3>,
 }
 
 impl Emitter {
@@ -103,6 +108,7 @@ impl Emitter {
             z_shift,
             arcs: false,
             plane: Plane::Xy,
+            steps: None,
         };
         for h in header {
             comment(&mut e.out, h);
@@ -121,11 +127,20 @@ impl Emitter {
 
     /// An axis value as written: X and Y rounded, Z rounded up.
     fn coord(&self, v: f64, axis: usize) -> String {
-        let (v, dec) = if axis == 2 {
+        let (mut v, dec) = if axis == 2 {
             (v + self.z_shift, 4)
         } else {
             (v, 4)
         };
+        // a Z exactly half a step between two steps is rounded either
+        // way by GRBL's float arithmetic once the work offset is added:
+        // a tenth of a micrometre higher it is one step for certain
+        if let (2, Some(steps), false) = (axis, self.steps, self.inch) {
+            let at = (v * 1e4).round() / 1e4 * steps.z;
+            if (at - at.floor() - 0.5).abs() < 1e-6 {
+                v = (v * 1e4).round() / 1e4 + 1e-4;
+            }
+        }
         if self.inch {
             let u = v / 25.4;
             let u = if axis == 2 {
@@ -164,6 +179,20 @@ impl Emitter {
         }
         if l.is_empty() || l == "G0" || l == "G1" {
             return; // no motion at this resolution
+        }
+        if let (Some(q), Some(steps)) = (prev, self.steps) {
+            let step = |v: f64, k: usize| (self.written(v, k) * steps[k]).round();
+            if !q.is_nan() && (0..3).all(|k| step(q[k], k) == step(p[k], k)) {
+                // not a step on any axis: GRBL would drop it and go on
+                // from where it stands. A descent or a level move is left
+                // out (what follows from here passes no lower); a rise is
+                // written a whole step up, so that it runs
+                if self.written(p.z, 2) <= self.written(q.z, 2) {
+                    return;
+                }
+                let up = self.written(q.z, 2) - self.z_shift + 1.0 / steps.z;
+                return self.go(DVec3::new(p.x, p.y, up + 1e-9), rapid, feed);
+            }
         }
         self.motion = Some(g);
         if !rapid && self.feed != Some(feed) {

@@ -35,6 +35,8 @@ pub struct SendJob {
     pub hold_limit: Option<f64>,
     /// What to do at an M0.
     pub on_pause: sender::OnPause,
+    /// The touch plate, for `OnPause::Probe`.
+    pub plate: Option<sender::TouchOff>,
 }
 
 impl SendJob {
@@ -59,6 +61,7 @@ impl SendJob {
             link_timeout: self.link_timeout.unwrap_or(defaults.link_timeout),
             hold_limit: self.hold_limit.unwrap_or(defaults.hold_limit),
             on_pause: self.on_pause,
+            plate: self.plate,
             ..defaults
         };
         let mut r = Replies::new(port);

@@ -40,6 +40,12 @@ pub struct JobLine {
     pub dwell: f64,
     /// M0: the machine holds here (a tool change) until cycle start.
     pub pause: bool,
+    /// The comments on the lines without G-code just before it (what an
+    /// M0 asks of the operator).
+    pub note: String,
+    /// At an M0, the job's modal state there (units, distance mode, and
+    /// where the tool stands in work coordinates), for a touch-off.
+    pub state: Option<Box<Modal>>,
 }
 
 /// What to do when the job pauses at an M0.
@@ -50,6 +56,51 @@ pub enum OnPause {
     Ask,
     /// Continue at once (unattended runs, tests).
     Continue,
+    /// Touch off Z on the touch plate (--plate), then continue (asking
+    /// first on a terminal, where the tool is to be fitted).
+    Probe,
+}
+
+/// A Z touch-off on a touch plate: G38.2 down fast, back off, again
+/// slowly, then the work Z set from the trigger point so that the plate's
+/// top is Z = thickness.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TouchOff {
+    pub thickness: f64,
+    /// Where the plate lies (work X, Y); None = under the tool.
+    pub at: Option<(f64, f64)>,
+    /// Fast probing feed, mm/min.
+    pub feed: f64,
+    /// How far the fast probe may go down, mm.
+    pub travel: f64,
+}
+
+/// Slow probing feed, mm/min: the machine stops within a micrometre of
+/// the trigger (the trigger point itself is what sets Z).
+const SLOW_PROBE: f64 = 10.0;
+/// Rise over the plate before moving to it, mm.
+const PLATE_CLEARANCE: f64 = 10.0;
+
+impl TouchOff {
+    /// `THICKNESS[@X,Y]`, mm.
+    pub fn parse(s: &str) -> std::result::Result<TouchOff, String> {
+        let bad = || format!("'{s}': expected THICKNESS[@X,Y] in mm");
+        let num = |v: &str| v.trim().parse::<f64>().ok().filter(|v| v.is_finite());
+        let (t, at) = match s.split_once('@') {
+            Some((t, at)) => {
+                let (x, y) = at.split_once(',').ok_or_else(bad)?;
+                (t, Some((num(x).ok_or_else(bad)?, num(y).ok_or_else(bad)?)))
+            }
+            None => (s, None),
+        };
+        let thickness = num(t).filter(|t| *t >= 0.0).ok_or_else(bad)?;
+        Ok(TouchOff {
+            thickness,
+            at,
+            feed: 100.0,
+            travel: 50.0,
+        })
+    }
 }
 
 /// The lines of a job that carry anything for GRBL.
@@ -58,11 +109,18 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
     let text = crate::input::read_text(path, crate::input::MAX_FILE)?;
     let mut out = Vec::new();
     let mut modal = Modal::new(DVec3::ZERO);
+    let mut note = String::new();
     for (k, l) in text.lines().enumerate() {
         let s = strip(l);
         // '%' marks a program's start and end in a file; GRBL takes it
         // for a bad word, so it is not sent
         if s.is_empty() || s == "%" {
+            for c in parse_line(l, k + 1).comments {
+                if !note.is_empty() {
+                    note.push_str("; ");
+                }
+                note.push_str(&c);
+            }
             continue;
         }
         // GRBL acts on these bytes wherever they come, even inside a line:
@@ -99,7 +157,12 @@ pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
             sync: step.as_ref().is_some_and(|st| st.sync),
             relative: step.as_ref().is_some_and(|st| st.relative),
             pause: step.as_ref().is_some_and(|st| st.pause),
+            state: step
+                .as_ref()
+                .is_some_and(|st| st.pause)
+                .then(|| Box::new(modal.clone())),
             dwell: step.and_then(|st| st.dwell).unwrap_or(0.0),
+            note: std::mem::take(&mut note),
         });
     }
     if out.is_empty() {
@@ -133,6 +196,8 @@ pub struct Options {
     /// When each line should end by the time estimate (for the ETA).
     pub clock: Option<Vec<f64>>,
     pub on_pause: OnPause,
+    /// The touch plate for `OnPause::Probe`.
+    pub plate: Option<TouchOff>,
     /// The shortest move sure to take a planner block: a step of the
     /// coarsest axis ($100-$102), since GRBL drops a move of no steps.
     pub min_move: f64,
@@ -153,6 +218,7 @@ impl Default for Options {
             min_move: MIN_MOVE,
             clock: None,
             on_pause: OnPause::Ask,
+            plate: None,
         }
     }
 }
@@ -468,8 +534,9 @@ pub fn stream(
     let mut stop_time: Option<f64> = None;
     let mut last_reply = start;
     let mut tracker = Tracker::new(opts.planner, opts.min_move);
-    // an acknowledged M0 whose hold has not been seen yet
-    let mut pausing: Option<usize> = None;
+    // a sent M0 (item index) nothing is sent past until its pause is
+    // dealt with; and whether cycle start has released it
+    let mut gate: Option<(usize, bool)> = None;
     let mut progress = Progress::new(opts.progress, lines.len(), opts.clock.clone());
     let mut batch = Vec::new();
     loop {
@@ -480,7 +547,7 @@ pub fn stream(
             break;
         }
         batch.clear();
-        while !stopping && next < items.len() {
+        while !stopping && next < items.len() && gate.is_none() {
             let len = items[next].text.len() + 1;
             let fits = if opts.char_counting {
                 used + len <= budget || inflight.is_empty()
@@ -498,6 +565,9 @@ pub fn stream(
             out.bytes += len;
             inflight.push_back((next, len));
             used += len;
+            if items[next].job.is_some_and(|k| lines[k].pause) {
+                gate = Some((next, false));
+            }
             next += 1;
         }
         if !batch.is_empty() {
@@ -554,9 +624,6 @@ pub fn stream(
                     out.stop = Some(e);
                 }
             } else if let Some(k) = items[item].job {
-                if lines[k].pause {
-                    pausing = Some(k);
-                }
                 out.acked += 1;
                 progress.set(k + 1, None);
                 if let Some(j) = journal.as_mut() {
@@ -581,10 +648,16 @@ pub fn stream(
                     j.executed(lines[e].number)?;
                 }
             }
-            if let (Some(k), true) = (pausing, st.state.starts_with("Hold")) {
-                pausing = None;
+            // held at the gate's M0 (everything before it answered; GRBL
+            // answers the M0 itself when released)
+            let at_gate = gate.filter(|g| !g.1 && inflight.front().is_none_or(|f| f.0 >= g.0));
+            if let (Some((g, _)), true) = (at_gate, st.state.starts_with("Hold")) {
+                let k = items[g].job.unwrap_or(0);
                 progress.suspend(|| resume_pause(r, &lines[k], opts.on_pause))?;
+                gate = Some((g, true));
                 hold_since = None;
+                // (the operator's time is not the link's silence)
+                last_reply = r.port.now();
             } else if st.state.starts_with("Hold") || st.state.starts_with("Door") {
                 let since = *hold_since.get_or_insert(now);
                 if now - since > opts.hold_limit && !stopping {
@@ -620,6 +693,19 @@ pub fn stream(
         } else if l.starts_with("Grbl ") {
             bail!("GRBL reset during the job (power or a soft reset); nothing more was sent");
         }
+        // released and answered: the touch-off, then on with the job
+        if let Some((g, true)) = gate {
+            if inflight.is_empty() && !stopping {
+                let k = items[g].job.unwrap_or(0);
+                if let (OnPause::Probe, Some(plate)) = (opts.on_pause, opts.plate) {
+                    let state = lines[k].state.as_deref().cloned();
+                    let state = state.unwrap_or_else(|| Modal::new(DVec3::ZERO));
+                    progress.suspend(|| touch_off(r, &plate, &state))?;
+                    last_reply = r.port.now();
+                }
+                gate = None;
+            }
+        }
         if let Some(j) = journal.as_mut() {
             j.flush()?;
         }
@@ -654,8 +740,12 @@ pub fn stream(
 /// continue with cycle start once the operator presses Enter, or at once.
 fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
     use std::io::IsTerminal;
-    let what = format!("paused at job line {} '{}'", line.number, line.original);
-    if on == OnPause::Ask {
+    let mut what = format!("paused at job line {} '{}'", line.number, line.original);
+    if !line.note.is_empty() {
+        what.push_str(&format!(" ({})", line.note));
+    }
+    let ask = on == OnPause::Ask || (on == OnPause::Probe && std::io::stdin().is_terminal());
+    if ask {
         if !std::io::stdin().is_terminal() {
             bail!(
                 "{what}, and there is no terminal to ask: the machine is holding; continue \
@@ -667,10 +757,113 @@ fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
         std::io::stdin()
             .read_line(&mut answer)
             .map_err(|e| crate::Error(format!("reading the terminal: {e}")))?;
+    } else if on == OnPause::Probe {
+        eprintln!("{what}: touching off on the plate (--on-pause probe)");
     } else {
         eprintln!("{what}: continuing (--on-pause continue)");
     }
     r.port.write_all(&[super::CYCLE_START])
+}
+
+/// One line at a time, outside the job: its reply lines up to `ok`; an
+/// error or alarm is the touch-off's failure.
+fn exchange(r: &mut Replies, line: &str, timeout: f64) -> Result<Vec<String>> {
+    r.port.write_all(format!("{line}\n").as_bytes())?;
+    let until = r.port.now() + timeout;
+    let mut got = Vec::new();
+    while r.port.now() < until {
+        let Some(l) = r.next(until - r.port.now())? else {
+            continue;
+        };
+        if l == "ok" {
+            return Ok(got);
+        }
+        if l.starts_with("error:") || l.starts_with("ALARM:") {
+            bail!(
+                "touch-off: '{line}' got {l}{}; the machine stands where the probe stopped",
+                if l == "ALARM:5" {
+                    " (the probe met nothing: is the plate under the tool and its clip on?)"
+                } else {
+                    ""
+                }
+            );
+        }
+        if !l.starts_with('<') {
+            got.push(l);
+        }
+    }
+    bail!("touch-off: no reply to '{line}' within {timeout} s")
+}
+
+/// x, y, z in a `[NAME:x,y,z...]` report line.
+fn report_triple(lines: &[String], name: &str) -> Option<DVec3> {
+    let body = lines
+        .iter()
+        .find_map(|l| l.strip_prefix(&format!("[{name}:")))?;
+    let v: Vec<f64> = body
+        .trim_end_matches(']')
+        .split([',', ':'])
+        .take(3)
+        .map(|x| x.parse().ok())
+        .collect::<Option<_>>()?;
+    (v.len() == 3).then(|| DVec3::new(v[0], v[1], v[2]))
+}
+
+/// A Z touch-off at a pause, the machine idle: over the plate (rising
+/// over it first), probe down fast, back off, probe slowly, set the
+/// active system's Z from the slow probe's trigger point (G10 L2, net of
+/// G92 and the tool length offset, so the machine's overshoot does not
+/// count), rise clear of the plate and return to where the job paused;
+/// the job's units and distance mode restored.
+fn touch_off(r: &mut Replies, t: &TouchOff, job: &Modal) -> Result<()> {
+    let n = crate::gcode::emit::num;
+    let work = job.pos - job.wco();
+    let probe_time = 60.0 * t.travel / t.feed + 30.0;
+    exchange(r, "G21", 5.0)?;
+    if let Some((x, y)) = t.at {
+        exchange(
+            r,
+            &format!("G91G0Z{}", n(t.thickness + PLATE_CLEARANCE)),
+            60.0,
+        )?;
+        exchange(r, &format!("G90G0X{}Y{}", n(x), n(y)), 120.0)?;
+    }
+    exchange(
+        r,
+        &format!("G91G38.2Z-{}F{}", n(t.travel), n(t.feed)),
+        probe_time,
+    )?;
+    exchange(r, "G91G0Z1", 30.0)?;
+    let got = exchange(r, &format!("G91G38.2Z-2F{}", n(SLOW_PROBE)), 60.0)?;
+    let prb = report_triple(&got, "PRB")
+        .ok_or_else(|| crate::Error("touch-off: no [PRB:] report after G38.2".into()))?;
+    let params = exchange(r, "$#", 5.0)?;
+    let g92 = report_triple(&params, "G92").unwrap_or(DVec3::ZERO);
+    let tlo = params
+        .iter()
+        .find_map(|l| l.strip_prefix("[TLO:"))
+        .and_then(|v| v.trim_end_matches(']').parse::<f64>().ok())
+        .unwrap_or(0.0);
+    // work Z at the trigger = the plate's thickness
+    let wcs_z = prb.z - g92.z - tlo - t.thickness;
+    exchange(r, &format!("G10L2P0Z{}", n(wcs_z)), 5.0)?;
+    let clear = work.z.max(t.thickness + 5.0);
+    exchange(r, &format!("G90G0Z{}", n(clear)), 60.0)?;
+    if t.at.is_some() {
+        exchange(r, &format!("G90G0X{}Y{}", n(work.x), n(work.y)), 120.0)?;
+        exchange(r, &format!("G90G0Z{}", n(work.z)), 60.0)?;
+    }
+    eprintln!(
+        "touch-off: the plate's top at machine Z{:.3}; work Z0 set {:.3} mm below it",
+        prb.z, t.thickness
+    );
+    if job.inches {
+        exchange(r, "G20", 5.0)?;
+    }
+    if !job.absolute {
+        exchange(r, "G91", 5.0)?;
+    }
+    Ok(())
 }
 
 /// After a feed hold: half a second for the hold to take (replies read

@@ -75,6 +75,16 @@ impl Plate {
     }
 }
 
+/// A completed move as the tool's tip went: machine coordinates less the
+/// length of the tool in the spindle (the `tool`-th, from 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TipMove {
+    pub from: DVec3,
+    pub to: DVec3,
+    pub rapid: bool,
+    pub tool: usize,
+}
+
 /// A probing move under way: when it ends, where the machine stops, the
 /// `[PRB:...]` report, and its line.
 #[derive(Clone, Debug)]
@@ -123,8 +133,9 @@ pub struct SimGrbl {
     dwell: Option<(f64, String)>,
     /// A feed hold that cycle start does not release (fault).
     stuck: bool,
-    /// Held by an M0 until cycle start.
-    paused: bool,
+    /// Held by an M0 until cycle start: its line, answered then (GRBL's
+    /// main loop waits in the hold, taking no further line).
+    paused: Option<String>,
     next_chatter: f64,
     /// Every G-code line executed, in order, as GRBL's line buffer held
     /// it: a move when it completes, a line without motion when GRBL has
@@ -156,9 +167,8 @@ pub struct SimGrbl {
     probing: Option<Probing>,
     /// The last probe's trigger point (machine) and whether it touched.
     probed: (DVec3, bool),
-    /// Every completed move as the tool's tip went (machine coordinates
-    /// less the tool's length): (from, to, rapid).
-    pub tips: Vec<(DVec3, DVec3, bool)>,
+    /// Every completed move as the tool's tip went.
+    pub tips: Vec<TipMove>,
     /// The work offset last reported, and status reports since.
     wco_said: (DVec3, usize),
 }
@@ -184,7 +194,7 @@ impl SimGrbl {
             waiting: None,
             dwell: None,
             stuck: false,
-            paused: false,
+            paused: None,
             next_chatter: 0.0,
             log: Vec::new(),
             errors: Vec::new(),
@@ -224,7 +234,7 @@ impl SimGrbl {
 
     /// When the running block completes, if one runs.
     fn block_due(&self) -> Option<f64> {
-        (self.held_left.is_none() && !self.paused && !self.planner.is_empty())
+        (self.held_left.is_none() && self.paused.is_none() && !self.planner.is_empty())
             .then_some(self.block_end)
     }
 
@@ -252,7 +262,12 @@ impl SimGrbl {
             if self.block_due().is_some_and(|e| e <= at) {
                 let b = self.planner.pop_front().unwrap();
                 let tip = self.tip();
-                self.tips.push((b.start - tip, b.end - tip, b.rapid));
+                self.tips.push(TipMove {
+                    from: b.start - tip,
+                    to: b.end - tip,
+                    rapid: b.rapid,
+                    tool: self.tool,
+                });
                 self.done = b.end;
                 self.log.extend(b.lines);
                 if let Some(next) = self.planner.front() {
@@ -307,14 +322,14 @@ impl SimGrbl {
                 if let Some(left) = self.held_left.take() {
                     self.block_end = self.now + left;
                 }
-                if std::mem::take(&mut self.paused) {
+                if let Some(line) = self.paused.take() {
                     // the operator changed the tool while it held
                     if self.tool + 1 < self.tool_lengths.len() {
                         self.tool += 1;
                     }
-                    if let Some(b) = self.planner.front() {
-                        self.block_end = self.now + b.duration;
-                    }
+                    self.log.push(line);
+                    self.say("ok");
+                    self.pump();
                 }
             }
             SOFT_RESET => self.reset(),
@@ -343,7 +358,7 @@ impl SimGrbl {
         self.last_dir = None;
         self.held_left = None;
         self.stuck = false;
-        self.paused = false;
+        self.paused = None;
         self.waiting = None;
         self.dwell = None;
         self.probing = None;
@@ -370,7 +385,7 @@ impl SimGrbl {
     fn status(&mut self) -> String {
         let state = if self.alarm.is_some() {
             "Alarm"
-        } else if self.held_left.is_some() || self.stuck || self.paused {
+        } else if self.held_left.is_some() || self.stuck || self.paused.is_some() {
             "Hold:0"
         } else if self.check {
             "Check"
@@ -468,7 +483,12 @@ impl SimGrbl {
     fn end_probe(&mut self) {
         let Some(p) = self.probing.take() else { return };
         let tip = self.tip();
-        self.tips.push((self.done - tip, p.stop - tip, false));
+        self.tips.push(TipMove {
+            from: self.done - tip,
+            to: p.stop - tip,
+            rapid: false,
+            tool: self.tool,
+        });
         self.done = p.stop;
         self.modal.pos = p.stop;
         self.probed = (p.touched.unwrap_or(p.stop), p.touched.is_some());
@@ -512,7 +532,7 @@ impl SimGrbl {
     /// the planner to empty), as GRBL's main loop does.
     fn pump(&mut self) {
         loop {
-            if self.dwell.is_some() || self.probing.is_some() {
+            if self.dwell.is_some() || self.probing.is_some() || self.paused.is_some() {
                 return;
             }
             if let Some(line) = self.waiting.take() {
@@ -597,8 +617,10 @@ impl SimGrbl {
             self.say("[MSG:Pgm End]");
         }
         if step.pause && !self.check {
-            // the moves before it are done (it synchronised): hold here
-            self.paused = true;
+            // the moves before it are done (it synchronised): hold here,
+            // answering once cycle start releases it
+            self.paused = Some(line);
+            return;
         }
         if let (Some(probe), Some(to)) = (step.probe, step.to) {
             if !self.check {
@@ -946,11 +968,22 @@ mod tests {
         assert!(send(&mut s, "$#\n").contains("[PRB:10.000,10.000,20.000:1]"));
         // the next tool, 7.3 mm longer, touches 7.3 mm higher
         run(&mut s, "G0 Z40\n", 60.0);
-        run(&mut s, "M0\n", 60.0);
+        // M0 holds, answering only once cycle start releases it
+        assert_eq!(run(&mut s, "M0\n", 5.0), "");
         assert!(send(&mut s, "?").starts_with("<Hold"));
         s.receive(b'~');
+        assert_eq!(String::from_utf8_lossy(&s.take_output()), "ok\r\n");
         let out = run(&mut s, "G38.2 Z0 F100\n", 60.0);
         assert!(out.contains("[PRB:10.000,10.000,27.300:1]"), "{out}");
+        // moves go on after a probe and a work offset set by G10 L2
+        run(&mut s, "G91G0Z1\n", 60.0);
+        run(&mut s, "G91G38.2Z-2F10\n", 60.0);
+        run(&mut s, "G10L2P0Z7.3\n", 60.0);
+        run(&mut s, "G90G0Z25\n", 60.0);
+        let t = s.now + 10.0;
+        s.advance(t);
+        let st = send(&mut s, "?");
+        assert!(st.starts_with("<Idle|MPos:10.000,10.000,32.300"), "{st}");
         // nothing under the tool: ALARM:5
         run(&mut s, "G0 Z40\n", 60.0);
         run(&mut s, "G0 X100 Y100\n", 60.0);
