@@ -353,7 +353,11 @@ fn an_inch_job_cuts_what_the_mm_job_cuts() {
         "inch vs mm job: largest difference {worst:.6} mm over {} cells",
         a.len()
     );
-    assert!(worst < 0.001, "{worst}");
+    // within one Z step of the grbl-generic profile (its 250 steps/mm):
+    // the writer fits a move shorter than a step to the machine's steps
+    // (left out, or a whole step up), and mm and inch numbers round to
+    // the step grid differently
+    assert!(worst < 0.004 + 1e-6, "{worst}");
     // GRBL's parser (the simulated machine's) takes every line
     let machine = relievo::machine::Machine::load("grbl-generic").unwrap();
     let mut port = MemPort::new(SimGrbl::new(&machine), 115200);

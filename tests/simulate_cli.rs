@@ -337,7 +337,7 @@ fn malformed_jobs_fail_with_the_line_and_leave_nothing() {
         ("G0 Z5\nG1 X1\n", "line 2"),
         ("G0 Z5\n\n\nG2 X1 Y1 I5 J5 F100\n", "line 4"),
         ("G0 Z5\nG38.2 Z-3\n", "line 2"),
-        ("G0 X1 (never closed\n", "line 1"),
+        ("G0 X1 %\n", "line 1: GRBL error:1"),
     ] {
         let nc = d.join("bad.nc");
         std::fs::write(&nc, job).unwrap();

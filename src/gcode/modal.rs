@@ -96,6 +96,8 @@ pub struct Step {
     pub end: bool,
     /// A `$J=` jog: it moves, and changes no mode.
     pub jog: bool,
+    /// A jog's feed, mm/min.
+    pub jog_feed: f64,
 }
 
 /// A line GRBL refuses: its `error:N` code and what is wrong.
@@ -613,6 +615,7 @@ impl Modal {
                 return refuse(16, "a jog takes only G20/G21, G90/G91 and G53");
             }
             step.jog = true;
+            step.jog_feed = f;
             if axis_command != AxisCommand::None {
                 step.motion = 1;
                 step.to = Some(target);

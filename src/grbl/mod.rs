@@ -63,5 +63,7 @@ pub const STATUS: u8 = b'?';
 pub const FEED_HOLD: u8 = b'!';
 pub const CYCLE_START: u8 = b'~';
 pub const SOFT_RESET: u8 = 0x18;
+/// Jog cancel: a jog stops, its queued blocks dropped.
+pub const JOG_CANCEL: u8 = 0x85;
 /// Toggles the spindle off while in feed hold.
 pub const SPINDLE_STOP: u8 = 0x9e;

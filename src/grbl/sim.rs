@@ -5,7 +5,7 @@
 //! check mode, alarms, and injectable faults. It has no clock of its own:
 //! the port that carries its bytes says what time it is.
 
-use super::{SOFT_RESET, WELCOME};
+use super::{JOG_CANCEL, SOFT_RESET, WELCOME};
 use crate::gcode::modal::{Modal, Probe, Step, PROBE_TOWARD};
 use crate::gcode::parse::{parse_line, strip};
 use crate::machine::Machine;
@@ -96,9 +96,18 @@ struct Probing {
     line: String,
 }
 
+/// How a block moves: its length, its programmed and top speeds (mm/s),
+/// acceleration (mm/s^2) and entry speed; the overrides scale it when it
+/// runs.
 #[derive(Clone, Debug)]
 struct Block {
-    duration: f64,
+    dist: f64,
+    v: f64,
+    top: f64,
+    a: f64,
+    entry: f64,
+    /// A `$J=` jog (no feed override acts on it).
+    jog: bool,
     start: DVec3,
     rapid: bool,
     end: DVec3,
@@ -171,6 +180,8 @@ pub struct SimGrbl {
     pub tips: Vec<TipMove>,
     /// The work offset last reported, and status reports since.
     wco_said: (DVec3, usize),
+    /// Feed, rapid and spindle overrides, percent.
+    ov: (u32, u32, u32),
 }
 
 impl SimGrbl {
@@ -217,6 +228,7 @@ impl SimGrbl {
             probed: (DVec3::ZERO, false),
             tips: Vec::new(),
             wco_said: (DVec3::ZERO, 0),
+            ov: (100, 100, 100),
         };
         s.say(&format!("\r\n{WELCOME}"));
         s
@@ -271,7 +283,7 @@ impl SimGrbl {
                 self.done = b.end;
                 self.log.extend(b.lines);
                 if let Some(next) = self.planner.front() {
-                    self.block_end = self.now + next.duration;
+                    self.block_end = self.now + self.run_time(next);
                 }
             }
             if self.dwell.as_ref().is_some_and(|d| d.0 <= at) {
@@ -333,6 +345,8 @@ impl SimGrbl {
                 }
             }
             SOFT_RESET => self.reset(),
+            JOG_CANCEL => self.cancel_jog(),
+            0x90..=0x9d => self.override_by(b),
             super::SPINDLE_STOP => {
                 if self.held_left.is_some() {
                     self.spindle = 0.0;
@@ -347,6 +361,109 @@ impl SimGrbl {
                 }
             }
         }
+    }
+
+    /// How long `b` takes at the overrides now: its trapezoid at the
+    /// overridden speed (a jog keeps its own).
+    fn run_time(&self, b: &Block) -> f64 {
+        let (f, r, _) = self.ov;
+        let v = if b.jog {
+            b.v
+        } else if b.rapid {
+            b.top * r as f64 / 100.0
+        } else {
+            (b.v * f as f64 / 100.0).min(b.top)
+        };
+        let entry = b.entry.min(v);
+        let ramp = (v * v - entry * entry) / (2.0 * b.a);
+        if b.dist >= ramp {
+            (v - entry) / b.a + (b.dist - ramp) / v
+        } else {
+            ((entry * entry + 2.0 * b.a * b.dist).sqrt() - entry) / b.a
+        }
+    }
+
+    /// A realtime override byte (0x90-0x9D) as GRBL 1.1 takes it; the
+    /// running block goes on at the new speed from where it is.
+    fn override_by(&mut self, b: u8) {
+        let before = self.planner.front().map(|f| self.run_time(f));
+        let (f, r, s) = &mut self.ov;
+        let step = |v: &mut u32, by: i32| *v = (*v as i32 + by).clamp(10, 200) as u32;
+        match b {
+            0x90 => *f = 100,
+            0x91 => step(f, 10),
+            0x92 => step(f, -10),
+            0x93 => step(f, 1),
+            0x94 => step(f, -1),
+            0x95 => *r = 100,
+            0x96 => *r = 50,
+            0x97 => *r = 25,
+            0x99 => *s = 100,
+            0x9a => step(s, 10),
+            0x9b => step(s, -10),
+            0x9c => step(s, 1),
+            0x9d => step(s, -1),
+            _ => {}
+        }
+        if self.spindle > 0.0 {
+            self.spindle = self.modal.speed.max(1.0) * self.ov.2 as f64 / 100.0;
+        }
+        let after = self.planner.front().map(|f| self.run_time(f));
+        if let (Some(t0), Some(t1)) = (before, after) {
+            if t0 > 0.0 {
+                match self.held_left.as_mut() {
+                    Some(left) => *left *= t1 / t0,
+                    None => self.block_end = self.now + (self.block_end - self.now) * t1 / t0,
+                }
+            }
+        }
+    }
+
+    /// Jog cancel (0x85): a jog stops where it is (within the block it
+    /// is in) and the jog blocks queued behind it are dropped.
+    fn cancel_jog(&mut self) {
+        let Some(b) = self.planner.front().filter(|b| b.jog).cloned() else {
+            return;
+        };
+        let total = self.run_time(&b).max(1e-12);
+        let left = self
+            .held_left
+            .unwrap_or(self.block_end - self.now)
+            .clamp(0.0, total);
+        let stop = b.start + (b.end - b.start) * (1.0 - left / total);
+        let tip = self.tip();
+        self.tips.push(TipMove {
+            from: b.start - tip,
+            to: stop - tip,
+            rapid: false,
+            tool: self.tool,
+        });
+        self.planner.retain(|b| !b.jog);
+        self.held_left = None;
+        self.last_dir = None;
+        self.done = stop;
+        self.modal.pos = stop;
+    }
+
+    /// `$J=...`: a jog, if the machine is idle or jogging.
+    fn jog(&mut self, words: &str) {
+        let jogging = self.planner.iter().all(|b| b.jog);
+        if self.alarm.is_some() || !jogging || self.paused.is_some() || self.probing.is_some() {
+            return self.error(8);
+        }
+        let step = match self.modal.jog(&parse_line(words, 0)) {
+            Ok(s) => s,
+            Err(r) => return self.error(r.code),
+        };
+        if let Some(to) = step.to {
+            let lim = self.travel;
+            if (0..3).any(|k| to[k].abs() > lim[k] + 1e-9) {
+                self.modal.pos = step.from;
+                return self.error(15);
+            }
+            self.queue_as(step.from, to, String::new(), Some(step.jog_feed));
+        }
+        self.say("ok")
     }
 
     /// Soft reset: buffers and planner cleared; a reset in motion raises
@@ -389,6 +506,8 @@ impl SimGrbl {
             "Hold:0"
         } else if self.check {
             "Check"
+        } else if self.planner.front().is_some_and(|b| b.jog) {
+            "Jog"
         } else if !self.planner.is_empty() || self.probing.is_some() {
             "Run"
         } else {
@@ -413,6 +532,7 @@ impl SimGrbl {
         } else {
             self.wco_said.1 += 1;
         }
+        s.push_str(&format!("|Ov:{},{},{}", self.ov.0, self.ov.1, self.ov.2));
         s.push('>');
         s
     }
@@ -715,6 +835,11 @@ impl SimGrbl {
     /// move allows (junction deviation, as GRBL computes it), never faster
     /// than the previous move got, and accelerates toward its rate.
     fn queue(&mut self, from: DVec3, target: DVec3, line: String) {
+        self.queue_as(from, target, line, None)
+    }
+
+    /// Queue a move; `jog`: a jog at that feed (mm/min).
+    fn queue_as(&mut self, from: DVec3, target: DVec3, line: String, jog: Option<f64>) {
         let d = target - from;
         let dist = d.length();
         // GRBL plans in whole steps and drops a block of none
@@ -730,10 +855,11 @@ impl SimGrbl {
                 .fold(f64::INFINITY, f64::min)
         };
         let top = along(self.max_rate) / 60.0;
-        let v = if self.modal.motion == 0 {
-            top
-        } else {
-            (self.modal.feed.unwrap_or(1.0) / 60.0).min(top)
+        let rapid = self.modal.motion == 0 && jog.is_none();
+        let v = match jog {
+            Some(f) => (f / 60.0).min(top),
+            None if rapid => top,
+            None => (self.modal.feed.unwrap_or(1.0) / 60.0).min(top),
         };
         let a = along(self.accel);
         let entry = match (self.planner.is_empty(), self.last_dir) {
@@ -754,24 +880,29 @@ impl SimGrbl {
             _ => 0.0,
         };
         let ramp = (v * v - entry * entry) / (2.0 * a);
-        let (duration, exit) = if dist >= ramp {
-            ((v - entry) / a + (dist - ramp) / v, v)
+        let exit = if dist >= ramp {
+            v
         } else {
-            let ve = (entry * entry + 2.0 * a * dist).sqrt();
-            ((ve - entry) / a, ve)
+            (entry * entry + 2.0 * a * dist).sqrt()
         };
         self.last_dir = Some(u);
         self.last_exit = exit;
-        if self.planner.is_empty() {
-            self.block_end = self.now + duration;
-        }
-        self.planner.push_back(Block {
-            duration,
+        let block = Block {
+            dist,
+            v,
+            top,
+            a,
+            entry,
+            jog: jog.is_some(),
             start: from,
-            rapid: self.modal.motion == 0,
+            rapid,
             end: target,
             lines: if line.is_empty() { vec![] } else { vec![line] },
-        });
+        };
+        if self.planner.is_empty() {
+            self.block_end = self.now + self.run_time(&block);
+        }
+        self.planner.push_back(block);
     }
 
     /// Fold a line into the modal state; GRBL's error code for what it
@@ -781,6 +912,9 @@ impl SimGrbl {
     }
 
     fn system(&mut self, cmd: &str) {
+        if let Some(words) = cmd.strip_prefix("J=") {
+            return self.jog(words);
+        }
         match cmd {
             "C" => {
                 if self.check {
@@ -989,6 +1123,86 @@ mod tests {
         run(&mut s, "G0 X100 Y100\n", 60.0);
         let out = run(&mut s, "G38.2 Z0 F500\n", 60.0);
         assert!(out.contains("ALARM:5"), "{out}");
+    }
+
+    /// Run `text` on a fresh machine to the end; simulated seconds taken.
+    fn run_time_of(text: &str, before: &[u8]) -> f64 {
+        let mut s = machine();
+        for &b in before {
+            s.receive(b);
+        }
+        let mut t = 0.0;
+        for l in text.lines() {
+            send(&mut s, &format!("{l}\n"));
+            // keep the planner fed as a sender does
+            while s.planner.len() >= PLANNER_BLOCKS {
+                t += 0.01;
+                s.advance(t);
+            }
+        }
+        while !s.planner.is_empty() {
+            t += 0.01;
+            s.advance(t);
+        }
+        s.now
+    }
+
+    /// Issue 10 acceptance 4: feed override at 50% (five 0x92) doubles a
+    /// feed-bound job's time within 5%; rapids follow the rapid override.
+    #[test]
+    fn feed_override_scales_the_run_time() {
+        let mut job = String::from("G1 F300\n");
+        for k in 0..40 {
+            job.push_str(&format!("G1 X{} Y{}\n", 20 * (k % 2), k));
+        }
+        let full = run_time_of(&job, &[]);
+        let half = run_time_of(&job, &[0x92; 5]);
+        let ratio = half / full;
+        eprintln!("feed-bound job: {full:.3} s at 100%, {half:.3} s at 50% ({ratio:.4}x)");
+        assert!(
+            (ratio - 2.0).abs() <= 0.1,
+            "{full:.2} s, at 50% {half:.2} s"
+        );
+        // 0x93/0x94 step by 1%, the range is 10-200%
+        let mut s = machine();
+        for _ in 0..30 {
+            s.receive(0x91);
+        }
+        s.receive(0x94);
+        assert!(send(&mut s, "?").contains("|Ov:199,100,100"));
+        let rapid = "G0 X100 Y100\nG0 X0 Y0\n";
+        let r100 = run_time_of(rapid, &[]);
+        let r25 = run_time_of(rapid, &[0x97]);
+        assert!(r25 > 2.5 * r100, "rapids {r100:.2} s, at 25% {r25:.2} s");
+    }
+
+    /// Issue 10 acceptance 4: a jog runs as `$J=` lines, in state Jog, and
+    /// 0x85 stops it within the planner block it is in, dropping the rest.
+    #[test]
+    fn a_jog_is_cancelled_within_its_block() {
+        let mut s = machine();
+        assert_eq!(send(&mut s, "$J=G91 X10 F600\n"), "ok\r\n");
+        assert_eq!(send(&mut s, "$J=G91 X10 F600\n"), "ok\r\n");
+        assert_eq!(send(&mut s, "$J=X5 F600 S100\n"), "error:36\r\n");
+        assert_eq!(send(&mut s, "$J=G1 X5 F600\n"), "error:16\r\n");
+        assert_eq!(send(&mut s, "$J=X5\n"), "error:22\r\n");
+        assert_eq!(send(&mut s, "$J=X9999 F600\n"), "error:15\r\n");
+        // a jog changes no mode: G91 did not stay
+        assert!(s.modal.absolute);
+        s.advance(0.6);
+        assert!(send(&mut s, "?").starts_with("<Jog"));
+        s.receive(JOG_CANCEL);
+        let x = s.done.x;
+        eprintln!("jog cancelled at X{x:.3} (its block from X0 to X10)");
+        assert!(
+            x > 4.0 && x < 10.0,
+            "stopped at X{x}, inside the first jog's block"
+        );
+        assert!(s.planner.is_empty());
+        s.advance(10.0);
+        assert!(send(&mut s, "?").starts_with(&format!("<Idle|MPos:{x:.3},")));
+        // a G-code line goes on from there
+        assert_eq!(send(&mut s, "G1 X0 F600\n"), "ok\r\n");
     }
 
     #[test]
