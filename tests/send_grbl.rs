@@ -721,3 +721,48 @@ fn a_tool_change_touches_off_on_the_plate() {
     }
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Issue 10: `relievo machine jog|zero|probe|settings` over the real
+/// serial code, against the simulated GRBL with a 20 mm touch plate at
+/// machine X10 Y0.
+#[test]
+fn machine_jogs_zeroes_and_probes() {
+    let (mut sim, dev) = grbl_sim(&[
+        "--machine",
+        "shapeoko",
+        "--speed",
+        "20",
+        "--plate",
+        "20@10,0",
+    ]);
+    let status_until = |want: &str| {
+        let t0 = std::time::Instant::now();
+        loop {
+            let o = run(&["machine", "status", "--port", &dev]);
+            let s = String::from_utf8_lossy(&o.stdout).to_string();
+            if s.contains(want) || t0.elapsed().as_secs() > 10 {
+                return s;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+    };
+    ok(&run(&[
+        "machine", "jog", "--port", &dev, "--x", "10", "--z", "30", "--feed", "3000",
+    ]));
+    let s = status_until("MPos:10.000,0.000,30.000");
+    assert!(s.contains("<Idle|MPos:10.000,0.000,30.000"), "{s}");
+    ok(&run(&["machine", "zero", "--port", &dev, "--axes", "xy"]));
+    // the plate's top is 20 mm over the stock top: Z0 lands on the stock
+    let o = run(&["machine", "probe", "--port", &dev, "--plate", "20"]);
+    ok(&o);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("[G54:10.000,0.000,0.000]"), "{out}");
+    assert!(out.contains("[PRB:10.000,0.000,20.000:1]"), "{out}");
+    let o = run(&["machine", "settings", "--port", &dev]);
+    ok(&o);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("$100=40.000"));
+    let o = run(&["machine", "jog", "--port", &dev]);
+    assert!(!o.status.success());
+    let _ = sim.kill();
+    let _ = sim.wait();
+}

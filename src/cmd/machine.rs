@@ -10,13 +10,43 @@ pub struct MachineArgs {
     pub port: String,
     #[arg(long, default_value_t = 115200)]
     pub baud: u32,
+    /// jog: distance along X, mm (relative to where the tool is).
+    #[arg(long, allow_negative_numbers = true)]
+    pub x: Option<f64>,
+    /// jog: distance along Y, mm.
+    #[arg(long, allow_negative_numbers = true)]
+    pub y: Option<f64>,
+    /// jog: distance along Z, mm.
+    #[arg(long, allow_negative_numbers = true)]
+    pub z: Option<f64>,
+    /// jog: feed, mm/min.
+    #[arg(long, default_value_t = 500.0)]
+    pub feed: f64,
+    /// zero: the axes whose work zero is set where the tool is.
+    #[arg(long, default_value = "xyz")]
+    pub axes: String,
+    /// probe: the touch plate's thickness and where it lies (work X, Y;
+    /// without it, under the tool), mm.
+    #[arg(long, value_name = "THICKNESS[@X,Y]", value_parser = relievo::grbl::sender::TouchOff::parse)]
+    pub plate: Option<relievo::grbl::sender::TouchOff>,
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum MachineAction {
+    /// The machine's state, read-only (never resets it).
     Status,
+    /// $X: leave an alarm.
     Unlock,
+    /// $H: home.
     Home,
+    /// $$: the machine's settings.
+    Settings,
+    /// $J=: move by --x/--y/--z at --feed.
+    Jog,
+    /// G10 L20: work zero on --axes where the tool is.
+    Zero,
+    /// A Z touch-off on the plate (--plate): work Z0 on the stock under it.
+    Probe,
 }
 
 pub fn run(args: MachineArgs) -> relievo::Result<()> {
@@ -49,7 +79,40 @@ pub fn run(args: MachineArgs) -> relievo::Result<()> {
             r.handshake(2.5)?;
             match action {
                 MachineAction::Unlock => r.command("$X", 5.0)?,
-                _ => r.command("$H", 120.0)?,
+                MachineAction::Home => r.command("$H", 120.0)?,
+                MachineAction::Settings => r.command("$$", 5.0)?,
+                MachineAction::Jog => {
+                    let n = relievo::gcode::emit::num;
+                    let words: String = [('X', args.x), ('Y', args.y), ('Z', args.z)]
+                        .iter()
+                        .filter_map(|(c, v)| v.map(|v| format!("{c}{}", n(v))))
+                        .collect();
+                    if words.is_empty() {
+                        relievo::bail!("machine jog: give --x, --y and/or --z (mm)");
+                    }
+                    if !(args.feed.is_finite() && args.feed > 0.0) {
+                        relievo::bail!("--feed {}: must be positive, mm/min", args.feed);
+                    }
+                    r.command(&format!("$J=G91G21{words}F{}", n(args.feed)), 5.0)?
+                }
+                MachineAction::Zero => {
+                    let axes: String = args.axes.to_ascii_uppercase();
+                    if axes.is_empty() || !axes.chars().all(|c| "XYZ".contains(c)) {
+                        relievo::bail!("--axes {}: some of x, y, z", args.axes);
+                    }
+                    let words: String = axes.chars().map(|c| format!("{c}0")).collect();
+                    r.command(&format!("G10L20P0{words}"), 5.0)?
+                }
+                MachineAction::Probe => {
+                    let Some(plate) = args.plate else {
+                        relievo::bail!(
+                            "machine probe: give the plate with --plate THICKNESS[@X,Y]"
+                        );
+                    };
+                    relievo::grbl::sender::touch_off(&mut r, &plate, None)?;
+                    r.command("$#", 5.0)?
+                }
+                MachineAction::Status => Vec::new(),
             }
         }
     };

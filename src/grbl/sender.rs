@@ -700,7 +700,7 @@ pub fn stream(
                 if let (OnPause::Probe, Some(plate)) = (opts.on_pause, opts.plate) {
                     let state = lines[k].state.as_deref().cloned();
                     let state = state.unwrap_or_else(|| Modal::new(DVec3::ZERO));
-                    progress.suspend(|| touch_off(r, &plate, &state))?;
+                    progress.suspend(|| touch_off(r, &plate, Some(&state)))?;
                     last_reply = r.port.now();
                 }
                 gate = None;
@@ -809,15 +809,15 @@ fn report_triple(lines: &[String], name: &str) -> Option<DVec3> {
     (v.len() == 3).then(|| DVec3::new(v[0], v[1], v[2]))
 }
 
-/// A Z touch-off at a pause, the machine idle: over the plate (rising
-/// over it first), probe down fast, back off, probe slowly, set the
-/// active system's Z from the slow probe's trigger point (G10 L2, net of
-/// G92 and the tool length offset, so the machine's overshoot does not
-/// count), rise clear of the plate and return to where the job paused;
-/// the job's units and distance mode restored.
-fn touch_off(r: &mut Replies, t: &TouchOff, job: &Modal) -> Result<()> {
+/// A Z touch-off, the machine idle: over the plate (rising over it
+/// first), probe down fast, back off, probe slowly, set the active
+/// system's Z from the slow probe's trigger point (G10 L2, net of G92 and
+/// the tool length offset, so the machine's overshoot does not count),
+/// rise clear of the plate; at a job's pause (`job`), return to where it
+/// paused, its units and distance mode restored.
+pub fn touch_off(r: &mut Replies, t: &TouchOff, job: Option<&Modal>) -> Result<()> {
     let n = crate::gcode::emit::num;
-    let work = job.pos - job.wco();
+    let work = job.map(|m| m.pos - m.wco());
     let probe_time = 60.0 * t.travel / t.feed + 30.0;
     exchange(r, "G21", 5.0)?;
     if let Some((x, y)) = t.at {
@@ -847,20 +847,20 @@ fn touch_off(r: &mut Replies, t: &TouchOff, job: &Modal) -> Result<()> {
     // work Z at the trigger = the plate's thickness
     let wcs_z = prb.z - g92.z - tlo - t.thickness;
     exchange(r, &format!("G10L2P0Z{}", n(wcs_z)), 5.0)?;
-    let clear = work.z.max(t.thickness + 5.0);
+    let clear = work.map_or(0.0, |w| w.z).max(t.thickness + 5.0);
     exchange(r, &format!("G90G0Z{}", n(clear)), 60.0)?;
-    if t.at.is_some() {
-        exchange(r, &format!("G90G0X{}Y{}", n(work.x), n(work.y)), 120.0)?;
-        exchange(r, &format!("G90G0Z{}", n(work.z)), 60.0)?;
+    if let (Some(_), Some(w)) = (t.at, work) {
+        exchange(r, &format!("G90G0X{}Y{}", n(w.x), n(w.y)), 120.0)?;
+        exchange(r, &format!("G90G0Z{}", n(w.z)), 60.0)?;
     }
     eprintln!(
         "touch-off: the plate's top at machine Z{:.3}; work Z0 set {:.3} mm below it",
         prb.z, t.thickness
     );
-    if job.inches {
+    if job.is_some_and(|m| m.inches) {
         exchange(r, "G20", 5.0)?;
     }
-    if !job.absolute {
+    if job.is_some_and(|m| !m.absolute) {
         exchange(r, "G91", 5.0)?;
     }
     Ok(())
