@@ -72,6 +72,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         hold_limit: Some(args.hold_limit),
         on_pause: args.on_pause,
         plate: args.plate,
+        keys: !quiet,
     };
     if args.on_pause == relievo::grbl::sender::OnPause::Probe && args.plate.is_none() {
         relievo::bail!("--on-pause probe: give the touch plate with --plate THICKNESS[@X,Y]");

@@ -37,6 +37,8 @@ pub struct SendJob {
     pub on_pause: sender::OnPause,
     /// The touch plate, for `OnPause::Probe`.
     pub plate: Option<sender::TouchOff>,
+    /// Keys on the terminal while streaming (hold/resume, feed override).
+    pub keys: bool,
 }
 
 impl SendJob {
@@ -62,6 +64,7 @@ impl SendJob {
             hold_limit: self.hold_limit.unwrap_or(defaults.hold_limit),
             on_pause: self.on_pause,
             plate: self.plate,
+            keys: self.keys,
             ..defaults
         };
         let mut r = Replies::new(port);

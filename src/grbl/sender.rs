@@ -6,7 +6,9 @@
 
 use super::port::Port;
 use super::resume::{Journal, Tracker};
-use super::{alarm_meaning, error_meaning, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS};
+use super::{
+    alarm_meaning, error_meaning, CYCLE_START, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS,
+};
 use crate::bail;
 use crate::error::Result;
 use crate::gcode::modal::Modal;
@@ -185,6 +187,9 @@ pub struct Options {
     pub journal: Option<PathBuf>,
     /// Progress bar / log lines on stderr.
     pub progress: bool,
+    /// Keys on the terminal while streaming (space: hold/resume, + and -:
+    /// feed override by 10%, 0: back to 100%).
+    pub keys: bool,
     /// Seconds without an answer (`ok`, `error`, alarm or status report)
     /// that mean the link is dead.
     pub link_timeout: f64,
@@ -219,6 +224,7 @@ impl Default for Options {
             clock: None,
             on_pause: OnPause::Ask,
             plate: None,
+            keys: false,
         }
     }
 }
@@ -538,6 +544,8 @@ pub fn stream(
     // dealt with; and whether cycle start has released it
     let mut gate: Option<(usize, bool)> = None;
     let mut progress = Progress::new(opts.progress, lines.len(), opts.clock.clone());
+    let mut keys = Keys::new(opts.keys && !check_mode);
+    let mut holding = false;
     let mut batch = Vec::new();
     loop {
         if cancel.load(Ordering::Relaxed) && !stopping {
@@ -545,6 +553,15 @@ pub fn stream(
             spindle_stop_once_held(r)?;
             out.stop = Some(Stop::Cancelled);
             break;
+        }
+        match keys.key() {
+            Some(b' ') => r
+                .port
+                .write_all(&[if holding { CYCLE_START } else { FEED_HOLD }])?,
+            Some(b'+') => r.port.write_all(&[FEED_OVERRIDE_UP])?,
+            Some(b'-') => r.port.write_all(&[FEED_OVERRIDE_DOWN])?,
+            Some(b'0') => r.port.write_all(&[FEED_OVERRIDE_RESET])?,
+            _ => {}
         }
         batch.clear();
         while !stopping && next < items.len() && gate.is_none() {
@@ -642,6 +659,7 @@ pub fn stream(
             break;
         } else if let Some(st) = parse_status(&l) {
             last_reply = r.port.now();
+            holding = st.state.starts_with("Hold");
             progress.set(out.acked, Some(st.pos));
             if let (Some(j), Some((blocks, _))) = (journal.as_mut(), st.free) {
                 if let Some(e) = tracker.status(blocks) {
@@ -653,7 +671,7 @@ pub fn stream(
             let at_gate = gate.filter(|g| !g.1 && inflight.front().is_none_or(|f| f.0 >= g.0));
             if let (Some((g, _)), true) = (at_gate, st.state.starts_with("Hold")) {
                 let k = items[g].job.unwrap_or(0);
-                progress.suspend(|| resume_pause(r, &lines[k], opts.on_pause))?;
+                keys.cooked(|| progress.suspend(|| resume_pause(r, &lines[k], opts.on_pause)))?;
                 gate = Some((g, true));
                 hold_since = None;
                 // (the operator's time is not the link's silence)
@@ -763,6 +781,76 @@ fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
         eprintln!("{what}: continuing (--on-pause continue)");
     }
     r.port.write_all(&[super::CYCLE_START])
+}
+
+/// GRBL's feed override bytes: +10%, -10%, 100%.
+const FEED_OVERRIDE_UP: u8 = 0x91;
+const FEED_OVERRIDE_DOWN: u8 = 0x92;
+const FEED_OVERRIDE_RESET: u8 = 0x90;
+
+/// Single keys from the terminal while a job streams: the terminal is
+/// put in non-canonical mode without echo (Ctrl-C still interrupts) and
+/// restored when the stream ends, however it ends.
+struct Keys {
+    saved: Option<libc::termios>,
+}
+
+impl Keys {
+    fn new(on: bool) -> Keys {
+        use std::io::IsTerminal;
+        if !on || !std::io::stdin().is_terminal() {
+            return Keys { saved: None };
+        }
+        // SAFETY: termios is plain data, filled by tcgetattr on fd 0
+        let mut t: libc::termios = unsafe { std::mem::zeroed() };
+        if unsafe { libc::tcgetattr(0, &mut t) } != 0 {
+            return Keys { saved: None };
+        }
+        let k = Keys { saved: Some(t) };
+        k.raw();
+        k
+    }
+
+    fn raw(&self) {
+        if let Some(mut t) = self.saved {
+            t.c_lflag &= !(libc::ICANON | libc::ECHO);
+            t.c_cc[libc::VMIN] = 0;
+            t.c_cc[libc::VTIME] = 0;
+            // SAFETY: a termios from tcgetattr, modified, on fd 0
+            unsafe { libc::tcsetattr(0, libc::TCSANOW, &t) };
+        }
+    }
+
+    fn restore(&self) {
+        if let Some(t) = self.saved {
+            // SAFETY: the termios tcgetattr gave, on fd 0
+            unsafe { libc::tcsetattr(0, libc::TCSANOW, &t) };
+        }
+    }
+
+    /// A key pressed since the last call, if any (never waits).
+    fn key(&mut self) -> Option<u8> {
+        self.saved?;
+        let mut b = [0u8; 1];
+        // SAFETY: reading one byte into a one-byte buffer; VMIN = VTIME = 0
+        // make it return at once
+        let n = unsafe { libc::read(0, b.as_mut_ptr() as *mut libc::c_void, 1) };
+        (n == 1).then_some(b[0])
+    }
+
+    /// Run `f` with the terminal as it was (for a question on it).
+    fn cooked<T>(&mut self, f: impl FnOnce() -> T) -> T {
+        self.restore();
+        let out = f();
+        self.raw();
+        out
+    }
+}
+
+impl Drop for Keys {
+    fn drop(&mut self) {
+        self.restore();
+    }
 }
 
 /// One line at a time, outside the job: its reply lines up to `ok`; an
