@@ -292,3 +292,39 @@ fn svg_and_preview() {
     assert!(hi - lo > 60, "preview contrast {lo}..{hi}");
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Issue 12: waterlines stay on the panel, where the job's travel is
+/// checked: the demo's raster+waterline job on the 3018 has no line out
+/// of its travel (before: 189 lines here, with Y down to -0.13 mm).
+#[test]
+fn waterlines_stay_within_the_travel() {
+    let d = scratch("wl-travel");
+    let job = d.join("job.nc");
+    ok(&run(&[
+        "carve",
+        "--machine",
+        "3018",
+        "--finish",
+        "raster+waterline",
+        "--resolution",
+        "150",
+        "-q",
+        "-o",
+        job.to_str().unwrap(),
+    ]));
+    let rep = simulate_report(
+        &job,
+        &d.join("job-relief.png"),
+        &d.join("cut.png"),
+        &["--machine", "3018"],
+    );
+    let out = rep["out_of_travel"].as_array().unwrap();
+    assert!(
+        out.is_empty(),
+        "{} lines out of travel: {:?}",
+        out.len(),
+        &out[..out.len().min(5)]
+    );
+    assert!(rep["max_gouge_mm"].as_f64().unwrap() <= 0.001, "{rep}");
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -1417,14 +1417,17 @@ impl ToolpathJob {
                 .collect();
             let mut loops: Vec<(bool, Vec<DVec3>)> = cs
                 .par_iter()
-                .map(|c| {
+                .flat_map_iter(|c| {
                     let c = waterline::place(hf, tool, floor, c);
                     let c = waterline::refine(hf, tool, floor, &c);
                     let mut pts = waterline::simplify(&c, self.tolerance);
                     if climb {
                         pts.reverse();
                     }
-                    (c.closed, waterline::clear(hf, tool, &pts))
+                    // within the panel, where the job's travel is checked
+                    let (pieces, whole) =
+                        waterline::clip_to(&waterline::clear(hf, tool, &pts), w, h);
+                    pieces.into_iter().map(move |p| (c.closed && whole, p))
                 })
                 .collect();
             // nearest next: closed loops start where they are nearest
