@@ -1425,8 +1425,9 @@ impl ToolpathJob {
                         pts.reverse();
                     }
                     // within the panel, where the job's travel is checked
-                    let (pieces, whole) =
-                        waterline::clip_to(&waterline::clear(hf, tool, &pts), w, h);
+                    let pts = waterline::clear(hf, tool, &pts);
+                    let pieces = tile::clip(&pts, [0.0, 0.0, w, h]);
+                    let whole = pieces.len() == 1 && pieces[0].len() == pts.len();
                     pieces.into_iter().map(move |p| (c.closed && whole, p))
                 })
                 .collect();

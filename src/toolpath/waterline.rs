@@ -181,67 +181,6 @@ pub fn every_nth(slope: f64) -> Option<i64> {
     Some(m)
 }
 
-/// `pts` clipped to the rectangle [0, w] x [0, h] (XY): the pieces
-/// inside, each cut where it crosses the edge (Z along the move, which is
-/// a stretch of a move already cleared). Whether nothing was cut away.
-pub fn clip_to(pts: &[DVec3], w: f64, h: f64) -> (Vec<Vec<DVec3>>, bool) {
-    let inside = |p: DVec3| (0.0..=w).contains(&p.x) && (0.0..=h).contains(&p.y);
-    if pts.iter().all(|&p| inside(p)) {
-        return (vec![pts.to_vec()], true);
-    }
-    // where a move from a to b enters or leaves the rectangle (Liang-Barsky)
-    let span = |a: DVec3, b: DVec3| {
-        let d = b - a;
-        let (mut t0, mut t1) = (0.0f64, 1.0f64);
-        for (p, q) in [(-d.x, a.x), (d.x, w - a.x), (-d.y, a.y), (d.y, h - a.y)] {
-            if p == 0.0 {
-                if q < 0.0 {
-                    return None;
-                }
-            } else {
-                let r = q / p;
-                if p < 0.0 {
-                    t0 = t0.max(r);
-                } else {
-                    t1 = t1.min(r);
-                }
-            }
-        }
-        (t0 <= t1).then_some((a + d * t0, a + d * t1))
-    };
-    let mut out: Vec<Vec<DVec3>> = Vec::new();
-    let mut cur: Vec<DVec3> = Vec::new();
-    for seg in pts.windows(2) {
-        match span(seg[0], seg[1]) {
-            Some((p, q)) => {
-                if cur.last().is_none_or(|l| (*l - p).length() > 1e-12) {
-                    if cur.len() > 1 {
-                        out.push(std::mem::take(&mut cur));
-                    }
-                    cur = vec![p];
-                }
-                cur.push(q);
-                if !inside(seg[1]) {
-                    if cur.len() > 1 {
-                        out.push(std::mem::take(&mut cur));
-                    }
-                    cur.clear();
-                }
-            }
-            None => {
-                if cur.len() > 1 {
-                    out.push(std::mem::take(&mut cur));
-                }
-                cur.clear();
-            }
-        }
-    }
-    if cur.len() > 1 {
-        out.push(cur);
-    }
-    (out, false)
-}
-
 /// The closed contours of the CL surface at `level`, each point on the
 /// exact CL surface within LEVEL_TOL below the level.
 pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
@@ -638,29 +577,6 @@ pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3]) -> Vec<DVec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn clipping_cuts_at_the_edges() {
-        let v = |x: f64, y: f64| DVec3::new(x, y, -1.0);
-        let (inside, whole) = clip_to(&[v(1.0, 1.0), v(2.0, 1.0)], 10.0, 5.0);
-        assert!(whole && inside.len() == 1);
-        // out below the panel and back: two pieces ending on Y = 0
-        let (p, whole) = clip_to(
-            &[
-                v(1.0, 1.0),
-                v(2.0, -1.0),
-                v(3.0, -1.0),
-                v(4.0, 1.0),
-                v(5.0, 1.0),
-            ],
-            10.0,
-            5.0,
-        );
-        assert!(!whole);
-        assert_eq!(p.len(), 2);
-        assert_eq!(p[0], vec![v(1.0, 1.0), v(1.5, 0.0)]);
-        assert_eq!(p[1], vec![v(3.5, 0.0), v(4.0, 1.0), v(5.0, 1.0)]);
-    }
 
     /// A dome and a steep-sided block on a floor, with a ball and a V tool:
     /// every contour closes and every point is on the CL surface at its
