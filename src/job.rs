@@ -9,6 +9,8 @@ use crate::relief::gradient::{shape_field, Field, Shaping};
 use crate::relief::panel::{Fade, Tilt};
 use crate::relief::{self, file, Method, Params, Relief, Stencil};
 use crate::scene::image_input::{load_png, ImageModel};
+use crate::scene::mesh::Mesh;
+use crate::scene::raster::DepthMap;
 use crate::scene::{self, Camera, Up};
 use crate::timing::Timings;
 use crate::{export, materials, preview};
@@ -107,6 +109,13 @@ impl Default for ReliefJob {
     }
 }
 
+/// What the camera saw of a model: a rendered mesh (with its object
+/// names) or a depth or normal-map picture.
+pub enum Sight {
+    Mesh(DepthMap, Vec<String>),
+    Image(ImageModel),
+}
+
 /// Default compression when neither flag nor material sets it.
 pub const DEFAULT_ALPHA: f64 = 4.0;
 /// Default depth (mm) without `--depth` or `--material`.
@@ -157,7 +166,8 @@ impl ReliefJob {
         Ok(p)
     }
 
-    fn validate(&self) -> Result<Params> {
+    /// Check every setting and input before any work: the parameters.
+    pub fn validate(&self) -> Result<Params> {
         if self.resolution < 8 || self.resolution > MAX_RESOLUTION {
             bail!(
                 "--resolution {}: must be between 8 and {MAX_RESOLUTION} pixels",
@@ -205,12 +215,10 @@ impl ReliefJob {
         self.params()
     }
 
-    /// Load the model and make the shaped field.
-    fn field(&self, p: &Params, t: &mut Timings) -> Result<(Field, Vec<String>)> {
-        let shaping = Shaping {
-            alpha: p.alpha,
-            threshold: p.silhouette,
-        };
+    /// Load the model (or take `mesh`, already loaded from it) and look at
+    /// it: the slow part of a relief, which no relief setting but the
+    /// camera, the resolution, the up axis and `--smooth` changes.
+    pub fn see(&self, mesh: Option<&Mesh>, p: &Params, t: &mut Timings) -> Result<Sight> {
         if self.model_is("png") {
             let path = self.model.as_ref().unwrap();
             let img = t.time("load", || load_png(path))?;
@@ -227,18 +235,23 @@ impl ReliefJob {
                     max as f64 / 1e6
                 );
             }
-            return Ok(t.time("gradients", || match &img {
-                ImageModel::Depth(d) => (shape_field(d, 1, shaping), d.objects.clone()),
-                ImageModel::Slopes(s) => (shape_field(s, 1, shaping), Vec::new()),
-            }));
+            return Ok(Sight::Image(img));
         }
-        let mesh = match &self.model {
-            Some(path) => t.time("load", || scene::mesh::load(path))?,
-            None => t.time("load", scene::demo::scene),
+        let loaded;
+        let mesh = match (mesh, &self.model) {
+            (Some(m), _) => m,
+            (None, Some(path)) => {
+                loaded = t.time("load", || scene::mesh::load(path))?;
+                &loaded
+            }
+            (None, None) => {
+                loaded = t.time("load", scene::demo::scene);
+                &loaded
+            }
         };
         let dm = t.time("rasterize", || {
             scene::render(
-                &mesh,
+                mesh,
                 &self.camera(),
                 self.resolution,
                 2,
@@ -249,8 +262,48 @@ impl ReliefJob {
         if dm.id.data.iter().all(|&i| i == 0) {
             bail!("{}: nothing visible from this view", self.model_name());
         }
-        let field = t.time("gradients", || shape_field(&dm, 2, shaping));
-        Ok((field, mesh.objects))
+        Ok(Sight::Mesh(dm, mesh.objects.clone()))
+    }
+
+    /// The shaped field of what was seen.
+    pub fn field(&self, sight: &Sight, p: &Params, t: &mut Timings) -> (Field, Vec<String>) {
+        let shaping = Shaping {
+            alpha: p.alpha,
+            threshold: p.silhouette,
+        };
+        t.time("gradients", || match sight {
+            Sight::Image(ImageModel::Depth(d)) => (shape_field(d, 1, shaping), d.objects.clone()),
+            Sight::Image(ImageModel::Slopes(s)) => (shape_field(s, 1, shaping), Vec::new()),
+            Sight::Mesh(dm, objects) => (shape_field(dm, 2, shaping), objects.clone()),
+        })
+    }
+
+    /// The relief of what was seen, with its warnings (a flat relief); the
+    /// field is returned for what else is made of it.
+    pub fn relief(
+        &self,
+        sight: &Sight,
+        p: &Params,
+        t: &mut Timings,
+    ) -> Result<(Relief, Field, Vec<String>)> {
+        let (field, objects) = self.field(sight, p, t);
+        let stencils = self.stencils(&field, &objects)?;
+        let relief = relief::build(&field, p, &stencils, t)?;
+        let warnings = relief::flatness(&relief, &field).into_iter().collect();
+        Ok((relief, field, warnings))
+    }
+
+    /// What the relief's JSON sidecar says of how it was made.
+    pub fn meta(&self, p: &Params) -> serde_json::Value {
+        serde_json::json!({
+            "model": self.model_name(),
+            "camera": self.camera(),
+            "resolution": self.resolution,
+            "material": self.material,
+            "relief": p,
+            "emphasize": self.emphasize,
+            "stencil": self.stencil.as_ref().map(|s| (s.display().to_string(), self.stencil_gain)),
+        })
     }
 
     /// The model's up axis and whether it was chosen by its file type.
@@ -331,10 +384,10 @@ impl ReliefJob {
         let params = self.validate()?;
         let mut t = Timings::default();
         stage("loading and rendering");
-        let (field, objects) = self.field(&params, &mut t)?;
-        let stencils = self.stencils(&field, &objects)?;
+        let sight = self.see(None, &params, &mut t)?;
         stage("integrating");
-        let relief = relief::build(&field, &params, &stencils, &mut t)?;
+        let (relief, field, warnings) = self.relief(&sight, &params, &mut t)?;
+        drop(sight);
         stage("writing");
         let depth_png = self.depth_out.as_ref().map(|_| {
             t.time("encode", || {
@@ -347,20 +400,11 @@ impl ReliefJob {
                 file::png16(&d)
             })
         });
-        let warnings: Vec<String> = relief::flatness(&relief, &field).into_iter().collect();
         // the field is 30 bytes a pixel: gone before the outputs are made
         let silhouette_edges = field.silhouette_edges;
-        drop((field, stencils));
+        drop(field);
         let mut out = Outputs::default();
-        let meta = serde_json::json!({
-            "model": self.model_name(),
-            "camera": self.camera(),
-            "resolution": self.resolution,
-            "material": self.material,
-            "relief": params,
-            "emphasize": self.emphasize,
-            "stencil": self.stencil.as_ref().map(|s| (s.display().to_string(), self.stencil_gain)),
-        });
+        let meta = self.meta(&params);
         t.time("encode", || -> Result<()> {
             let (png, json) = file::encode_relief(&relief, meta);
             out.add(&self.output, png);

@@ -22,6 +22,7 @@ pub mod grbl;
 pub mod machine;
 pub mod sim;
 pub mod simulate;
+pub mod studio;
 pub mod surface;
 pub mod sweep;
 pub mod tool;

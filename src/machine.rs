@@ -82,6 +82,11 @@ const BUILTIN: [(&str, &str); 3] = [
     ("shapeoko", include_str!("../machines/shapeoko.toml")),
 ];
 
+/// The names of the shipped machine profiles.
+pub fn builtin_names() -> Vec<&'static str> {
+    BUILTIN.iter().map(|b| b.0).collect()
+}
+
 impl Machine {
     /// A shipped profile by name, or a TOML file by path.
     pub fn load(name_or_path: &str) -> Result<Machine> {

@@ -4,7 +4,7 @@
 mod cmd;
 
 use clap::{Parser, Subcommand};
-use cmd::{carve, grbl_sim, machine, relief, send, simulate, toolpath};
+use cmd::{carve, grbl_sim, machine, relief, send, simulate, studio, toolpath};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -43,6 +43,9 @@ enum Cmd {
     Machine(machine::MachineArgs),
     /// Serve a simulated GRBL 1.1 machine on a pseudo-terminal (prints its path).
     GrblSim(grbl_sim::GrblSimArgs),
+    /// Design a relief, check its job and download the files in a web
+    /// page served on this machine.
+    Studio(studio::StudioArgs),
 }
 
 fn run(cli: Cli) -> relievo::Result<()> {
@@ -56,6 +59,7 @@ fn run(cli: Cli) -> relievo::Result<()> {
         Cmd::Ports => machine::ports(),
         Cmd::Machine(args) => machine::run(args),
         Cmd::GrblSim(args) => grbl_sim::run(args),
+        Cmd::Studio(args) => studio::run(args, quiet),
     }
 }
 

@@ -67,6 +67,14 @@ pub struct SimSummary {
     pub frame: Option<Frame>,
     pub tool: Tool,
     pub cells: (usize, usize),
+    /// The stock the job cut, its cut surface (Z of each cell, 0 = the
+    /// stock top) and each cell's deviation from the relief (mm, > 0 =
+    /// material left, < 0 = gouge, NaN = off the panel).
+    pub stock: Stock,
+    pub cut: Grid<f32>,
+    pub deviation: Grid<f32>,
+    /// Job coordinates of the panel's lower-left corner.
+    pub panel_at: (f64, f64),
     pub timings: Timings,
 }
 
@@ -345,6 +353,10 @@ impl SimulateJob {
             frame,
             tool,
             cells: (w, h),
+            stock,
+            cut,
+            deviation: dev,
+            panel_at,
             timings: t,
         })
     }

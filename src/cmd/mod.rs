@@ -7,6 +7,7 @@ pub mod machine;
 pub mod relief;
 pub mod send;
 pub mod simulate;
+pub mod studio;
 pub mod toolpath;
 
 use std::io::IsTerminal;

@@ -1,0 +1,390 @@
+//! The studio's HTTP side: the page and its assets from the binary, a
+//! small JSON/binary API over `Studio`, bounded bodies, and an error for
+//! every bad request (a panic in one request is that request's 500, the
+//! server keeps serving).
+
+use super::packet::{extreme, mean, shrink, Packet};
+use super::settings::{CutSettings, ReliefSettings};
+use super::work::{Fail, Studio};
+use super::{page, MAX_UPLOAD};
+use serde_json::{json, Value};
+use std::io::Read;
+use std::sync::atomic::{AtomicUsize, Ordering::SeqCst};
+use std::sync::Arc;
+use tiny_http::{Header, Method, Request, Response};
+
+/// Largest settings body (bytes).
+const MAX_JSON: usize = 64 << 10;
+/// Requests handled at once; more get a 503.
+const MAX_ACTIVE: usize = 32;
+/// Long side of the grids the views get (samples).
+const VIEW_MAX: usize = 1024;
+/// Most moves drawn in the job view.
+const MAX_DRAWN_MOVES: usize = 400_000;
+
+/// An answer: status, content type, body, extra headers.
+pub struct Reply {
+    status: u16,
+    kind: &'static str,
+    body: Vec<u8>,
+    attachment: Option<String>,
+}
+
+impl Reply {
+    fn json(status: u16, v: Value) -> Reply {
+        Reply {
+            status,
+            kind: "application/json",
+            body: serde_json::to_vec(&v).expect("json serializes"),
+            attachment: None,
+        }
+    }
+    fn error(status: u16, msg: impl Into<String>) -> Reply {
+        Reply::json(status, json!({ "error": msg.into() }))
+    }
+    fn binary(body: Vec<u8>) -> Reply {
+        Reply {
+            status: 200,
+            kind: "application/octet-stream",
+            body,
+            attachment: None,
+        }
+    }
+    fn file(kind: &'static str, name: &str, body: Vec<u8>) -> Reply {
+        Reply {
+            status: 200,
+            kind,
+            body,
+            attachment: Some(name.to_string()),
+        }
+    }
+}
+
+/// Serve `studio` on `server` until the process ends.
+pub fn run(server: tiny_http::Server, studio: Arc<Studio>) {
+    let active = Arc::new(AtomicUsize::new(0));
+    for rq in server.incoming_requests() {
+        if active.load(SeqCst) >= MAX_ACTIVE {
+            send(rq, Reply::error(503, "busy: too many requests at once"));
+            continue;
+        }
+        active.fetch_add(1, SeqCst);
+        let (studio, active) = (studio.clone(), active.clone());
+        std::thread::spawn(move || {
+            handle(rq, &studio);
+            active.fetch_sub(1, SeqCst);
+        });
+    }
+}
+
+fn send(rq: Request, r: Reply) {
+    let mut resp = Response::from_data(r.body)
+        .with_status_code(r.status)
+        .with_header(header("Content-Type", r.kind))
+        .with_header(header("Cache-Control", "no-store"));
+    if let Some(name) = r.attachment {
+        resp = resp.with_header(header(
+            "Content-Disposition",
+            &format!("attachment; filename=\"{name}\""),
+        ));
+    }
+    // the client may have gone; nothing to do then
+    let _ = rq.respond(resp);
+}
+
+fn header(k: &str, v: &str) -> Header {
+    Header::from_bytes(k.as_bytes(), v.as_bytes()).expect("ASCII header")
+}
+
+fn handle(mut rq: Request, studio: &Studio) {
+    let reply = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| route(&mut rq, studio)))
+        .unwrap_or_else(|_| Reply::error(500, "internal error (the studio goes on serving)"));
+    send(rq, reply);
+}
+
+/// The body, refused when longer than `max` (from its declared length
+/// first, so a huge upload is not read at all).
+fn body(rq: &mut Request, max: usize) -> Result<Vec<u8>, Reply> {
+    let too_big = || {
+        Reply::error(
+            413,
+            format!("request too large: at most {} MB", max as f64 / 1048576.0),
+        )
+    };
+    if rq.body_length().is_some_and(|n| n > max) {
+        return Err(too_big());
+    }
+    let mut b = Vec::new();
+    rq.as_reader()
+        .take(max as u64 + 1)
+        .read_to_end(&mut b)
+        .map_err(|e| Reply::error(400, format!("reading the request: {e}")))?;
+    if b.len() > max {
+        return Err(too_big());
+    }
+    Ok(b)
+}
+
+/// The query parameter `key` of a URL, percent-decoded.
+fn query(url: &str, key: &str) -> Option<String> {
+    let q = url.split_once('?')?.1;
+    q.split('&').find_map(|kv| {
+        let (k, v) = kv.split_once('=')?;
+        (k == key).then(|| percent_decode(v))
+    })
+}
+
+fn percent_decode(s: &str) -> String {
+    let b = s.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        let hex = |c: u8| (c as char).to_digit(16);
+        match b[i] {
+            b'%' if i + 2 < b.len() => match (hex(b[i + 1]), hex(b[i + 2])) {
+                (Some(h), Some(l)) => {
+                    out.push((h * 16 + l) as u8);
+                    i += 3;
+                    continue;
+                }
+                _ => out.push(b'%'),
+            },
+            b'+' => out.push(b' '),
+            c => out.push(c),
+        }
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+/// What the page sends to make a relief or a job.
+#[derive(serde::Deserialize, Default)]
+#[serde(default, deny_unknown_fields)]
+struct Ask {
+    relief: ReliefSettings,
+    cut: CutSettings,
+}
+
+fn ask(rq: &mut Request) -> Result<Ask, Reply> {
+    let b = body(rq, MAX_JSON)?;
+    serde_json::from_slice(&b).map_err(|e| Reply::error(400, format!("bad settings: {e}")))
+}
+
+fn failed(f: Fail) -> Reply {
+    match f {
+        Fail::Superseded => Reply::json(409, json!({"superseded": true})),
+        Fail::Bad(e) => Reply::error(400, e.0),
+    }
+}
+
+fn route(rq: &mut Request, studio: &Studio) -> Reply {
+    let url = rq.url().to_string();
+    let path = url.split('?').next().unwrap_or("");
+    match (rq.method(), path) {
+        (Method::Get, "/") | (Method::Get, "/index.html") => {
+            Reply::file_inline("text/html; charset=utf-8", page::INDEX)
+        }
+        (Method::Get, "/studio.js") => Reply::file_inline("text/javascript", page::SCRIPT),
+        (Method::Get, "/studio.css") => Reply::file_inline("text/css", page::STYLE),
+        (Method::Get, "/api/options") => Reply::json(200, super::options()),
+        (Method::Get, "/api/model") => Reply::json(200, model_info(studio)),
+        (Method::Get, "/api/mesh") => mesh(studio),
+        (Method::Post, "/api/model") => {
+            let Some(name) = query(&url, "name") else {
+                return Reply::error(400, "upload: the file's name is missing (?name=)");
+            };
+            let b = match body(rq, MAX_UPLOAD) {
+                Ok(b) => b,
+                Err(r) => return r,
+            };
+            match studio.upload(&name, &b) {
+                Ok(_) => Reply::json(200, model_info(studio)),
+                Err(e) => Reply::error(400, e.0),
+            }
+        }
+        (Method::Post, "/api/demo") => match studio.open(None) {
+            Ok(_) => Reply::json(200, model_info(studio)),
+            Err(e) => Reply::error(400, e.0),
+        },
+        (Method::Post, "/api/relief") => match ask(rq) {
+            Ok(a) => match studio.relief(&a.relief) {
+                Ok(m) => relief_packet(&m),
+                Err(f) => failed(f),
+            },
+            Err(r) => r,
+        },
+        (Method::Post, "/api/job") => match ask(rq) {
+            Ok(a) => match studio.job(&a.relief, &a.cut) {
+                Ok(j) => job_packet(&j),
+                Err(f) => failed(f),
+            },
+            Err(r) => r,
+        },
+        (Method::Get, p) if p.starts_with("/api/download/") => {
+            download(studio, &p["/api/download/".len()..])
+        }
+        (Method::Get, _) | (Method::Post, _) => Reply::error(404, format!("no such page: {path}")),
+        (m, _) => Reply::error(405, format!("{m} is not served")),
+    }
+}
+
+impl Reply {
+    fn file_inline(kind: &'static str, text: &str) -> Reply {
+        Reply {
+            status: 200,
+            kind,
+            body: text.as_bytes().to_vec(),
+            attachment: None,
+        }
+    }
+}
+
+fn model_info(studio: &Studio) -> Value {
+    let m = studio.model();
+    json!({
+        "name": m.name.clone().unwrap_or_else(|| "demo scene".into()),
+        "demo": m.name.is_none(),
+        "version": m.version,
+        "objects": m.mesh.as_ref().map(|x| x.objects.clone()).unwrap_or_default(),
+        "triangles": m.mesh.as_ref().map_or(0, |x| x.triangles.len()),
+        "picture": m.mesh.is_none(),
+    })
+}
+
+/// The model's triangles for the page's 3D view.
+fn mesh(studio: &Studio) -> Reply {
+    let m = studio.model();
+    let Some(mesh) = &m.mesh else {
+        return Reply::error(404, "a picture has no 3D view");
+    };
+    let pos: Vec<f32> = mesh.positions.iter().flat_map(|p| p.to_array()).collect();
+    let idx: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+    Reply::binary(
+        Packet::new(json!({"version": m.version}))
+            .f32("positions", &pos)
+            .u32("triangles", &idx)
+            .bytes(),
+    )
+}
+
+fn relief_packet(m: &super::work::Made) -> Reply {
+    let r = &m.relief;
+    let view = shrink(&r.heights, VIEW_MAX, mean);
+    Reply::binary(
+        Packet::new(json!({
+            "w": view.w,
+            "h": view.h,
+            "pixels": [r.heights.w, r.heights.h],
+            "width_mm": r.width_mm,
+            "height_mm": r.height_mm,
+            "depth_mm": r.depth_mm,
+            "warnings": m.warnings,
+            "command": m.command,
+            "timings": m.timings.report(),
+        }))
+        .f32("heights", &view.data)
+        .bytes(),
+    )
+}
+
+fn job_packet(j: &super::work::JobMade) -> Reply {
+    let s = &j.summary;
+    let rep = &j.sim.report;
+    let st = j.sim.stock;
+    let cut = shrink(&j.sim.cut, VIEW_MAX, mean);
+    let dev = shrink(&j.sim.deviation, VIEW_MAX, extreme);
+    // moves as pairs of points (x, y, z, 0 = rapid / 1 = feed)
+    let segs = &j.program.segments;
+    let stride = segs.len().div_ceil(MAX_DRAWN_MOVES).max(1);
+    let mut moves = Vec::with_capacity(segs.len() / stride * 8);
+    for g in segs.iter().step_by(stride) {
+        let k = matches!(g.kind, crate::gcode::Kind::Feed) as u8 as f32;
+        for p in [g.a, g.b] {
+            moves.extend([p.x as f32, p.y as f32, p.z as f32, k]);
+        }
+    }
+    let relief = &j.relief.relief;
+    Reply::binary(
+        Packet::new(json!({
+            "lines": s.lines,
+            "time": crate::sim::hms(s.time_s),
+            "time_s": s.time_s,
+            "gouge_mm": rep.max_gouge_mm,
+            "residual_mm": [rep.max_residual_mm, rep.mean_residual_mm],
+            "between_cells_mm": rep.between_cells_mm,
+            "rapids_in_stock": rep.rapids_in_stock.len(),
+            "out_of_travel": rep.out_of_travel.len(),
+            "engagement": s.engagement.summary(),
+            "notes": s.notes,
+            "rapid_m": s.rapid_mm / 1000.0,
+            "cut_m": s.cut_mm / 1000.0,
+            "stepover_mm": s.stepover_mm,
+            "stock": {"x0": st.x0, "y0": st.y0, "width": st.width, "height": st.height,
+                      "thickness": st.thickness},
+            "panel": {"x0": j.sim.panel_at.0, "y0": j.sim.panel_at.1,
+                      "width": relief.width_mm, "height": relief.height_mm, "depth": relief.depth_mm},
+            "cells": [cut.w, cut.h],
+            "stock_cells": [j.sim.cut.w, j.sim.cut.h],
+            "cell_mm": rep.cell_mm,
+            "moves_drawn": moves.len() / 8,
+            "moves": segs.len(),
+            "command": j.command,
+        }))
+        .f32("cut", &cut.data)
+        .f32("deviation", &dev.data)
+        .f32("moves", &moves)
+        .bytes(),
+    )
+}
+
+fn download(studio: &Studio, what: &str) -> Reply {
+    let none = |w: &str| Reply::error(404, format!("no {w} made yet"));
+    match what {
+        "relief.png" | "relief.json" | "relief.stl" => {
+            let Some(m) = studio.last_relief() else {
+                return none("relief");
+            };
+            match what {
+                "relief.png" => Reply::file("image/png", what, m.files().0),
+                "relief.json" => Reply::file("application/json", what, m.files().1),
+                _ => {
+                    let mut b = Vec::new();
+                    match crate::export::write_stl(&m.relief, m.job.base_mm, &mut b) {
+                        Ok(()) => Reply::file("model/stl", what, b),
+                        Err(e) => Reply::error(500, format!("STL: {e}")),
+                    }
+                }
+            }
+        }
+        "job.nc" | "job.svg" => {
+            let Some(j) = studio.last_job() else {
+                return none("job");
+            };
+            let kind = if what == "job.nc" {
+                "text/plain"
+            } else {
+                "image/svg+xml"
+            };
+            match std::fs::read(j.dir.join(what)) {
+                Ok(b) => Reply::file(kind, what, b),
+                Err(e) => Reply::error(500, format!("{what}: {e}")),
+            }
+        }
+        _ => Reply::error(404, format!("no such download: {what}")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn queries_decode() {
+        assert_eq!(
+            query("/api/model?x=1&name=my%20tea+pot.obj", "name").as_deref(),
+            Some("my tea pot.obj")
+        );
+        assert_eq!(query("/api/model?name=a%2", "name").as_deref(), Some("a%2"));
+        assert_eq!(query("/api/model", "name"), None);
+    }
+}

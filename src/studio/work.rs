@@ -1,0 +1,369 @@
+//! The studio's computations: the model on the bench, the relief of the
+//! current settings and the job cut from it, each made by the same library
+//! calls as `relievo relief`, `toolpath` and `simulate`. One computation
+//! runs at a time; a request that a newer one overtook is dropped, not
+//! queued, and a running one stops at its next stage.
+
+use super::settings::{carve_command, relief_command, CutSettings, ReliefSettings};
+use crate::bail;
+use crate::error::{Error, Result};
+use crate::job::{ReliefJob, Sight};
+use crate::relief::{file, Params, Relief};
+use crate::scene::mesh::Mesh;
+use crate::simulate::{SimSummary, SimulateJob};
+use crate::timing::Timings;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering::SeqCst};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+/// Why a computation gave no result.
+#[derive(Debug)]
+pub enum Fail {
+    /// A newer request came first: this one's answer would be stale.
+    Superseded,
+    /// The settings or the model were refused (shown in the page).
+    Bad(Error),
+}
+
+impl From<Error> for Fail {
+    fn from(e: Error) -> Fail {
+        Fail::Bad(e)
+    }
+}
+
+/// The model on the bench.
+pub struct Model {
+    /// As the command line names it (`None` = the demo scene).
+    pub name: Option<String>,
+    pub path: Option<PathBuf>,
+    /// Loaded once (`None` for the demo scene... loaded too, and for PNGs).
+    pub mesh: Option<Arc<Mesh>>,
+    /// Bumped by every new model, so nothing made of the last one is reused.
+    pub version: u64,
+}
+
+/// A relief and how it was made.
+pub struct Made {
+    pub model_version: u64,
+    pub settings: ReliefSettings,
+    pub job: ReliefJob,
+    pub params: Params,
+    pub relief: Relief,
+    pub warnings: Vec<String>,
+    pub command: String,
+    pub timings: Timings,
+}
+
+impl Made {
+    /// The relief file and its sidecar, as `relievo relief` writes them.
+    pub fn files(&self) -> (Vec<u8>, Vec<u8>) {
+        file::encode_relief(&self.relief, self.job.meta(&self.params))
+    }
+}
+
+/// A job, its simulated cut and its moves.
+pub struct JobMade {
+    pub relief: Arc<Made>,
+    pub cut: CutSettings,
+    pub summary: crate::cam::CamSummary,
+    pub sim: SimSummary,
+    pub program: crate::gcode::Program,
+    pub command: String,
+    /// Where its files are (job.nc, job.svg).
+    pub dir: PathBuf,
+}
+
+/// What the camera saw, kept while only relief settings change.
+struct Seen {
+    model_version: u64,
+    key: ReliefSettings,
+    sight: Arc<Sight>,
+}
+
+pub struct Studio {
+    /// Scratch folder: uploads, the job's files.
+    pub dir: PathBuf,
+    model: Mutex<Arc<Model>>,
+    seen: Mutex<Option<Seen>>,
+    relief: Mutex<Option<Arc<Made>>>,
+    job: Mutex<Option<Arc<JobMade>>>,
+    newest: AtomicU64,
+    versions: AtomicU64,
+    work: Mutex<()>,
+}
+
+/// A lock that a panicked holder left usable (its data is replaced whole).
+pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The settings that decide what the camera sees.
+fn sight_key(s: &ReliefSettings) -> ReliefSettings {
+    ReliefSettings {
+        view: s.view.clone(),
+        up: s.up.clone(),
+        yaw: s.yaw,
+        pitch: s.pitch,
+        roll: s.roll,
+        fov: s.fov,
+        resolution: s.resolution,
+        smooth: s.smooth,
+        flat_background: s.flat_background,
+        ..ReliefSettings::default()
+    }
+}
+
+/// Largest relief the studio makes (pixels on the long side).
+pub const MAX_RESOLUTION: usize = 4096;
+
+impl Studio {
+    /// A studio on `model` (`None` = the demo scene), its scratch files in
+    /// a new folder under `dir`.
+    pub fn new(model: Option<&Path>, dir: &Path) -> Result<Studio> {
+        let dir = dir.join(format!("relievo-studio-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).map_err(|e| Error(format!("{}: {e}", dir.display())))?;
+        let s = Studio {
+            dir,
+            model: Mutex::new(Arc::new(Model {
+                name: None,
+                path: None,
+                mesh: None,
+                version: 0,
+            })),
+            seen: Mutex::new(None),
+            relief: Mutex::new(None),
+            job: Mutex::new(None),
+            newest: AtomicU64::new(0),
+            versions: AtomicU64::new(0),
+            work: Mutex::new(()),
+        };
+        s.open(model.map(|p| (p.to_path_buf(), p.display().to_string())))?;
+        Ok(s)
+    }
+
+    pub fn model(&self) -> Arc<Model> {
+        lock(&self.model).clone()
+    }
+
+    /// Put a model on the bench (`None` = the demo scene): loaded and
+    /// checked before it replaces the current one.
+    pub fn open(&self, file: Option<(PathBuf, String)>) -> Result<Arc<Model>> {
+        let is_png = file
+            .as_ref()
+            .is_some_and(|(p, _)| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")));
+        let mesh = match &file {
+            None => Some(crate::scene::demo::scene()),
+            Some((p, _)) if !is_png => Some(crate::scene::mesh::load(p)?),
+            Some((p, _)) => {
+                crate::scene::image_input::load_png(p)?;
+                None
+            }
+        };
+        if let Some(m) = &mesh {
+            if m.triangles.is_empty() {
+                bail!(
+                    "{}: no triangles",
+                    file.as_ref().map_or("demo".into(), |f| f.1.clone())
+                );
+            }
+        }
+        let (path, name) = file.map_or((None, None), |(p, n)| (Some(p), Some(n)));
+        let m = Arc::new(Model {
+            name,
+            path,
+            mesh: mesh.map(Arc::new),
+            version: self.versions.fetch_add(1, SeqCst) + 1,
+        });
+        // whatever runs now is about the old model
+        self.newest.fetch_add(1, SeqCst);
+        *lock(&self.model) = m.clone();
+        Ok(m)
+    }
+
+    /// Save an upload under its own name (its extension tells its type)
+    /// and open it.
+    pub fn upload(&self, name: &str, bytes: &[u8]) -> Result<Arc<Model>> {
+        let base = Path::new(name)
+            .file_name()
+            .map(|n| n.to_string_lossy().to_string())
+            .unwrap_or_default();
+        let ext = Path::new(&base)
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase())
+            .unwrap_or_default();
+        if !["obj", "stl", "png"].contains(&ext.as_str()) {
+            bail!("{base}: not an OBJ, STL or PNG file (by its name)");
+        }
+        if bytes.is_empty() {
+            bail!("{base}: the file is empty");
+        }
+        let n = self.versions.load(SeqCst) + 1;
+        let safe: String = base
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let dir = self.dir.join(format!("upload-{n}"));
+        std::fs::create_dir_all(&dir).map_err(|e| Error(format!("{}: {e}", dir.display())))?;
+        let path = dir.join(safe);
+        std::fs::write(&path, bytes).map_err(|e| Error(format!("{}: {e}", path.display())))?;
+        let opened = self.open(Some((path.clone(), base.clone())));
+        if opened.is_err() {
+            let _ = std::fs::remove_dir_all(&dir);
+        }
+        opened.map_err(|e| Error(e.0.replace(&path.display().to_string(), &base)))
+    }
+
+    /// Take a ticket: every request newer than it makes it stale.
+    fn ticket(&self) -> u64 {
+        self.newest.fetch_add(1, SeqCst) + 1
+    }
+
+    fn live(&self, ticket: u64) -> std::result::Result<(), Fail> {
+        if self.newest.load(SeqCst) == ticket {
+            Ok(())
+        } else {
+            Err(Fail::Superseded)
+        }
+    }
+
+    /// The relief of `s`, reusing what the camera saw when only relief
+    /// settings changed.
+    pub fn relief(&self, s: &ReliefSettings) -> std::result::Result<Arc<Made>, Fail> {
+        let ticket = self.ticket();
+        let _one = lock(&self.work);
+        self.live(ticket)?;
+        self.relief_now(s, ticket)
+    }
+
+    fn relief_now(&self, s: &ReliefSettings, ticket: u64) -> std::result::Result<Arc<Made>, Fail> {
+        let model = self.model();
+        if let Some(m) = lock(&self.relief).as_ref() {
+            if m.model_version == model.version && m.settings == *s {
+                return Ok(m.clone());
+            }
+        }
+        if !(8..=MAX_RESOLUTION).contains(&s.resolution) {
+            return Err(Fail::Bad(Error(format!(
+                "--resolution {}: the studio makes 8 to {MAX_RESOLUTION} pixels",
+                s.resolution
+            ))));
+        }
+        let job = s.job(model.path.clone(), self.dir.join("relief.png"))?;
+        let params = job.validate()?;
+        let mut t = Timings::default();
+        let key = sight_key(s);
+        let cached = lock(&self.seen)
+            .as_ref()
+            .filter(|c| c.model_version == model.version && c.key == key)
+            .map(|c| c.sight.clone());
+        let sight = match cached {
+            Some(sight) => sight,
+            None => {
+                let sight = Arc::new(job.see(model.mesh.as_deref(), &params, &mut t)?);
+                *lock(&self.seen) = Some(Seen {
+                    model_version: model.version,
+                    key,
+                    sight: sight.clone(),
+                });
+                sight
+            }
+        };
+        self.live(ticket)?;
+        let (relief, _field, warnings) = job.relief(&sight, &params, &mut t)?;
+        let made = Arc::new(Made {
+            model_version: model.version,
+            settings: s.clone(),
+            command: relief_command(model.name.as_deref(), s),
+            job,
+            params,
+            relief,
+            warnings,
+            timings: t,
+        });
+        *lock(&self.relief) = Some(made.clone());
+        Ok(made)
+    }
+
+    /// The job of `c` on the relief of `s`, checked by the simulator.
+    pub fn job(
+        &self,
+        s: &ReliefSettings,
+        c: &CutSettings,
+    ) -> std::result::Result<Arc<JobMade>, Fail> {
+        let ticket = self.ticket();
+        let _one = lock(&self.work);
+        self.live(ticket)?;
+        let made = self.relief_now(s, ticket)?;
+        if let Some(j) = lock(&self.job).as_ref() {
+            if Arc::ptr_eq(&j.relief, &made) && j.cut == *c {
+                return Ok(j.clone());
+            }
+        }
+        self.live(ticket)?;
+        // a folder per job: a download of the last one is never half
+        // overwritten by the next
+        let dir = self.dir.join(format!("job-{ticket}"));
+        std::fs::create_dir_all(&dir).map_err(|e| Error(format!("{}: {e}", dir.display())))?;
+        let relief_path = dir.join("relief.png");
+        let (png, json) = made.files();
+        let write = |p: &Path, b: &[u8]| {
+            std::fs::write(p, b).map_err(|e| Error(format!("{}: {e}", p.display())))
+        };
+        write(&relief_path, &png)?;
+        write(&file::sidecar_path(&relief_path), &json)?;
+        let nc = dir.join("job.nc");
+        let tp = c.job(
+            nc.clone(),
+            dir.join("job.svg"),
+            "relief.png".into(),
+            made.settings.material.clone(),
+        )?;
+        let summary = tp.run(&made.relief)?;
+        self.live(ticket)?;
+        let sim = SimulateJob {
+            jobs: vec![nc.clone()],
+            relief: relief_path,
+            output: dir.join("cut.png"),
+            machine: c.machine.clone(),
+            ..SimulateJob::default()
+        }
+        .run()?;
+        let text = crate::input::read_text(&nc, crate::input::MAX_FILE)?;
+        let program = crate::gcode::program(&text)?;
+        let model = self.model();
+        let j = Arc::new(JobMade {
+            command: carve_command(model.name.as_deref(), s, c),
+            relief: made,
+            cut: c.clone(),
+            summary,
+            sim,
+            program,
+            dir,
+        });
+        // the job before this one is no longer offered
+        if let Some(old) = lock(&self.job).replace(j.clone()) {
+            let _ = std::fs::remove_dir_all(&old.dir);
+        }
+        Ok(j)
+    }
+
+    /// The last relief and job made, for downloads.
+    pub fn last_relief(&self) -> Option<Arc<Made>> {
+        lock(&self.relief).clone()
+    }
+    pub fn last_job(&self) -> Option<Arc<JobMade>> {
+        lock(&self.job).clone()
+    }
+}
+
+impl Drop for Studio {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
