@@ -39,7 +39,7 @@ impl Packet {
             .map(|(n, t, _, len)| json!({"name": n, "type": t, "len": len}))
             .collect();
         let mut j = serde_json::to_vec(&head).expect("head serializes");
-        while j.len() % 4 != 0 {
+        while !j.len().is_multiple_of(4) {
             j.push(b' ');
         }
         let mut out =

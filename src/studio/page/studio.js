@@ -11,7 +11,7 @@ const S = {
   options: null,
   model: null,
   touched: new Set(),
-  light: { az: 315, el: 30 },
+  light: { az: 315, el: 20 },
   orbit: { az: 0, el: 62, zoom: 1 },
   relief: null,
   job: null,
@@ -288,8 +288,9 @@ const gfx = (() => {
         }
         spec = 0.1;
       } else if (look == 0) {
-        float g = sin(world.x * 0.9 + 2.5 * sin(world.y * 0.07) + 0.8 * sin(world.y * 0.31 + world.x * 0.05));
-        base = mix(vec3(0.72, 0.53, 0.33), vec3(0.58, 0.40, 0.23), smoothstep(0.3, 1.0, g));
+        // fine grain along y, slowly wandering
+        float g = sin(world.x * 2.3 + 1.2 * sin(world.y * 0.045) + 0.4 * sin(world.y * 0.19 + world.x * 0.3));
+        base = mix(vec3(0.74, 0.56, 0.36), vec3(0.64, 0.46, 0.28), 0.6 * smoothstep(0.55, 1.0, g));
         spec = 0.08;
       } else if (look == 1) {
         float v = sin(world.x * 0.12 + world.y * 0.07 + 3.0 * sin(world.y * 0.05 + 2.0 * sin(world.x * 0.04)));
@@ -300,7 +301,9 @@ const gfx = (() => {
         spec = 0.7; shine = 48.0;
         base *= 0.75 + 0.25 * N.z;
       }
-      vec3 col = base * (0.18 + 0.82 * diff) + spec * pow(max(dot(N, Hv), 0.0), shine);
+      // a raking light darkens a flat panel: shade relative to the flat,
+      // as a carver's lamp and eye adapt
+      vec3 col = base * clamp(0.15 + 0.8 * diff / max(light.z, 0.25), 0.0, 1.25) + spec * pow(max(dot(N, Hv), 0.0), shine);
       colour = vec4(col, 1.0);
     }`);
 
@@ -311,7 +314,7 @@ const gfx = (() => {
     void main() { kind = p.w; gl_Position = mvp * vec4(p.xyz, 1.0); }`, `
     in float kind;
     out vec4 colour;
-    void main() { colour = kind > 0.5 ? vec4(0.05, 0.2, 0.55, 0.55) : vec4(0.9, 0.1, 0.1, 0.8); }`);
+    void main() { colour = kind > 0.5 ? vec4(0.05, 0.15, 0.45, 0.3) : vec4(0.95, 0.15, 0.1, 0.35); }`);
 
   const solid = program(`
     layout(location = 0) in vec3 p;
@@ -430,8 +433,8 @@ const gfx = (() => {
   function drawField(f, rect, withMoves) {
     const aspect = size();
     const cx = rect[0] + rect[2] / 2, cy = rect[1] + rect[3] / 2;
-    const span = Math.max(rect[2], rect[3] * aspect) / Math.min(1, aspect);
-    const dist = span * 1.9 / S.orbit.zoom;
+    // far enough that the panel fills the view with a margin
+    const dist = 1.15 * Math.max(rect[3], rect[2] / aspect) / (2 * Math.tan(15 * D)) / S.orbit.zoom;
     const o = S.orbit;
     const eye = [cx + dist * Math.cos(o.el * D) * Math.sin(o.az * D),
                  cy - dist * Math.cos(o.el * D) * Math.cos(o.az * D),

@@ -1,0 +1,259 @@
+//! `relievo studio` in a real browser (headless Chromium over WebDriver),
+//! judged on screenshots: a carver opens a model, moves the depth slider,
+//! checks the job and downloads it; the command line shown remakes the
+//! relief bit for bit; bad uploads and requests get errors and the studio
+//! goes on serving.
+
+mod common;
+
+use common::browser::{agent, changed, Browser, Studio};
+use common::{fixture, ok, scratch, simulate_report};
+use std::io::{Read, Write};
+
+/// A screenshot of the 3D view once it stops changing.
+fn settled(b: &Browser) -> image::RgbaImage {
+    let mut last = b.shot("#scene3d");
+    b.wait("the view to settle", 60, || {
+        std::thread::sleep(std::time::Duration::from_millis(300));
+        let now = b.shot("#scene3d");
+        let same = changed(&last, &now, 2) == 0.0;
+        last = now;
+        same.then(|| last.clone())
+    })
+}
+
+/// What a view shows: the share of its pixels off the background, and
+/// the standard deviation of their luminance (a blank view has neither).
+fn contrast(img: &image::RgbaImage) -> (f64, f64) {
+    let bg = img.get_pixel(2, 2).0;
+    let l: Vec<f64> = img
+        .pixels()
+        .filter(|p| p.0.iter().zip(bg).any(|(a, b)| a.abs_diff(b) > 3))
+        .map(|p| 0.3 * p[0] as f64 + 0.59 * p[1] as f64 + 0.11 * p[2] as f64)
+        .collect();
+    let n = l.len().max(1) as f64;
+    let m = l.iter().sum::<f64>() / n;
+    let sd = (l.iter().map(|x| (x - m).powi(2)).sum::<f64>() / n).sqrt();
+    (l.len() as f64 / (img.width() * img.height()) as f64, sd)
+}
+
+/// Fails when a view shows next to nothing.
+fn shows_something(img: &image::RgbaImage, what: &str) {
+    let (share, sd) = contrast(img);
+    eprintln!(
+        "{what}: {:.0}% of the view drawn, luminance deviation {sd:.1}",
+        100.0 * share
+    );
+    assert!(share > 0.15 && sd > 4.0, "{what} is blank");
+}
+
+/// Whether the status line tells of a relief `res` pixels on its long side.
+fn relief_at(b: &Browser, res: usize) -> bool {
+    let (s, err) = status(b);
+    !err && (s.starts_with(&format!("relief {res} ×")) || s.contains(&format!("× {res} px")))
+}
+
+fn status(b: &Browser) -> (String, bool) {
+    let err = b.script("return document.getElementById('status').className === 'error'");
+    (b.text("#status"), err.as_bool().unwrap_or(false))
+}
+
+#[test]
+fn a_carver_designs_checks_and_downloads_a_job() {
+    let dir = scratch("studio-e2e");
+    let Some(b) = Browser::start(&dir) else {
+        return;
+    };
+    let studio = Studio::start(&[]);
+    b.goto(&studio.url);
+    b.wait("the demo relief", 60, || relief_at(&b, 512).then_some(()));
+    // small enough for two cores, then a shipped model from the file picker
+    b.keys("#resolution", "256");
+    b.wait("the 256 px demo relief", 60, || {
+        relief_at(&b, 256).then_some(())
+    });
+    b.keys("#file", &fixture("spot.obj"));
+    b.wait("spot.obj on the bench", 60, || {
+        (b.text("#model-name").starts_with("spot.obj") && relief_at(&b, 256)).then_some(())
+    });
+    let before = settled(&b);
+    before.save(dir.join("relief-before.png")).unwrap();
+    shows_something(&before, "the relief view");
+    // the depth slider 20 steps down, one relief asked for at each step
+    // (the studio drops the ones overtaken): the relief view changes
+    b.keys("#depth", &"\u{E012}".repeat(20));
+    let after = b.wait("the relief view to change", 60, || {
+        let now = b.shot("#scene3d");
+        (changed(&before, &now, 4) > 0.03).then_some(now)
+    });
+    eprintln!(
+        "depth 5 -> 3 mm: {:.1}% of the view's pixels changed",
+        100.0 * changed(&before, &after, 4)
+    );
+    b.wait("the 3 mm relief", 60, || {
+        status(&b).0.ends_with("× 3.00 mm").then_some(())
+    });
+    let relief_view = settled(&b);
+    relief_view.save(dir.join("relief-after.png")).unwrap();
+    // the job: its view differs from the relief's, its summary is shown
+    b.click("#tabs button[data-tab=job]");
+    let summary = b.wait("the job's summary", 240, || {
+        let s = b.text("#summary");
+        s.contains("lines").then_some(s)
+    });
+    eprintln!("job summary: {summary}");
+    let shown: f64 = summary
+        .split("simulated gouge ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no gouge in {summary}"));
+    assert!(shown <= 0.001, "{summary}");
+    let job_view = settled(&b);
+    job_view.save(dir.join("job.png")).unwrap();
+    assert!(changed(&relief_view, &job_view, 12) > 0.05);
+    shows_something(&job_view, "the job view");
+    let legend = b.script("return getComputedStyle(document.getElementById('legend')).display");
+    assert_eq!(legend, "block", "no deviation legend");
+    // downloads, judged by the simulator
+    for id in ["#dl-nc", "#dl-png", "#dl-json"] {
+        b.click(id);
+    }
+    let nc = b.downloaded("job.nc");
+    let png = b.downloaded("relief.png");
+    b.downloaded("relief.json");
+    let report = simulate_report(&nc, &png, &dir.join("cut.png"), &[]);
+    let gouge = report["max_gouge_mm"].as_f64().unwrap();
+    eprintln!(
+        "downloaded job.nc: {} lines, simulated gouge {gouge} mm, residual max {} mm",
+        report["lines"], report["max_residual_mm"]
+    );
+    assert!(gouge <= 0.001, "the downloaded job gouges {gouge} mm");
+    // the command line shown remakes the relief bit for bit
+    let command = b.text("#command");
+    let line = command.lines().next().unwrap().to_string();
+    eprintln!("command shown: {line}");
+    let words: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(&words[..3], ["relievo", "relief", "spot.obj"], "{line}");
+    assert!(!line.contains('\''), "{line}");
+    let again = scratch("studio-e2e-cli");
+    std::fs::copy(fixture("spot.obj"), again.join("spot.obj")).unwrap();
+    ok(&common::bin()
+        .args(&words[1..])
+        .arg("-q")
+        .current_dir(&again)
+        .output()
+        .unwrap());
+    let made = std::fs::read(again.join("relief.png")).unwrap();
+    assert!(
+        made == std::fs::read(&png).unwrap(),
+        "`{line}` made a different relief from the studio's"
+    );
+}
+
+#[test]
+fn bad_uploads_and_requests_leave_the_studio_serving() {
+    let dir = scratch("studio-bad");
+    let Some(b) = Browser::start(&dir) else {
+        return;
+    };
+    let mut studio = Studio::start(&[]);
+    b.goto(&studio.url);
+    b.wait("the demo relief", 60, || {
+        status(&b).0.starts_with("relief").then_some(())
+    });
+    // garbage and an empty file through the page: an error shown there
+    let garbage = dir.join("garbage.obj");
+    let noise: Vec<u8> = (0..5000u32)
+        .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+        .collect();
+    std::fs::write(&garbage, noise).unwrap();
+    let empty = dir.join("empty.stl");
+    std::fs::write(&empty, b"").unwrap();
+    for (file, says) in [(&garbage, "garbage.obj"), (&empty, "empty")] {
+        b.keys("#file", file.to_str().unwrap());
+        let (msg, _) = b.wait("an upload error", 60, || {
+            let s = status(&b);
+            (s.1 && s.0.contains(says)).then_some(s)
+        });
+        eprintln!("{}: {msg}", file.display());
+        assert!(!msg.contains(&dir.display().to_string()), "{msg}");
+    }
+    // a huge file is refused by the page before it is sent...
+    b.script("upload(new File([new ArrayBuffer(studio.options.max_upload + 1)], 'huge.stl'))");
+    let (msg, _) = b.wait("the huge file's error", 30, || {
+        let s = status(&b);
+        (s.1 && s.0.contains("huge.stl")).then_some(s)
+    });
+    assert!(msg.contains("more than the 128 MB"), "{msg}");
+    // ...and by the server from its declared length alone
+    let host = studio.url.trim_start_matches("http://").to_string();
+    let mut s = std::net::TcpStream::connect(&host).unwrap();
+    write!(
+        s,
+        "POST /api/model?name=huge.stl HTTP/1.1\r\nHost: {host}\r\nContent-Length: 200000000\r\n\r\nsolid"
+    )
+    .unwrap();
+    let mut head = [0u8; 64];
+    let n = s.read(&mut head).unwrap();
+    let head = String::from_utf8_lossy(&head[..n]).to_string();
+    assert!(head.starts_with("HTTP/1.1 413"), "{head}");
+    drop(s);
+    // malformed requests: a clear error each
+    let http = agent();
+    let api = |path: &str, body: &str| {
+        let mut r = http
+            .post(format!("{}{path}", studio.url))
+            .content_type("application/json")
+            .send(body)
+            .unwrap();
+        let code = r.status().as_u16();
+        (code, r.body_mut().read_to_string().unwrap())
+    };
+    for (path, body, code, says) in [
+        ("/api/relief", "{not json", 400, "bad settings"),
+        (
+            "/api/relief",
+            r#"{"relief": {"colour": 3}}"#,
+            400,
+            "unknown field",
+        ),
+        (
+            "/api/relief",
+            r#"{"relief": {"fade": "sideways"}}"#,
+            400,
+            "--fade",
+        ),
+        (
+            "/api/relief",
+            r#"{"relief": {"resolution": 100000}}"#,
+            400,
+            "--resolution",
+        ),
+        ("/api/job", r#"{"cut": {"tool": "spoon:3"}}"#, 400, "spoon"),
+        ("/api/model", "x", 400, "name"),
+        ("/api/nothing", "", 404, "no such page"),
+    ] {
+        let (got, text) = api(path, body);
+        eprintln!("{path} {body}: {got} {text}");
+        assert_eq!(got, code, "{path} {body}: {text}");
+        assert!(text.contains(says), "{path} {body}: {text}");
+    }
+    // a bad setting typed in the page: its error shown there, then fixed
+    b.keys("#fade", "sideways");
+    b.wait("the fade error", 60, || {
+        let s = status(&b);
+        (s.1 && s.0.contains("--fade")).then_some(())
+    });
+    b.script("const f = document.getElementById('fade'); f.value = ''; f.dispatchEvent(new Event('input'))");
+    b.wait("a relief again", 60, || {
+        let s = status(&b);
+        (!s.1 && s.0.starts_with("relief")).then_some(())
+    });
+    assert!(studio.alive(), "the studio died");
+    let r = http
+        .get(format!("{}/api/model", studio.url))
+        .call()
+        .unwrap();
+    assert_eq!(r.status().as_u16(), 200);
+}
