@@ -287,10 +287,23 @@ impl ReliefJob {
         t: &mut Timings,
     ) -> Result<(Relief, Field, Vec<String>)> {
         let (field, objects) = self.field(sight, p, t);
-        let stencils = self.stencils(&field, &objects)?;
-        let relief = relief::build(&field, p, &stencils, t)?;
-        let warnings = relief::flatness(&relief, &field).into_iter().collect();
+        let (relief, warnings) = self.relief_from(&field, &objects, p, t)?;
         Ok((relief, field, warnings))
+    }
+
+    /// The relief of a shaped field (which depends on the view and on
+    /// the compression and silhouette settings only), with its warnings.
+    pub fn relief_from(
+        &self,
+        field: &Field,
+        objects: &[String],
+        p: &Params,
+        t: &mut Timings,
+    ) -> Result<(Relief, Vec<String>)> {
+        let stencils = self.stencils(field, objects)?;
+        let relief = relief::build(field, p, &stencils, t)?;
+        let warnings = relief::flatness(&relief, field).into_iter().collect();
+        Ok((relief, warnings))
     }
 
     /// What the relief's JSON sidecar says of how it was made.

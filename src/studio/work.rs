@@ -8,6 +8,7 @@ use super::settings::{carve_command, relief_command, CutSettings, ReliefSettings
 use crate::bail;
 use crate::error::{Error, Result};
 use crate::job::{ReliefJob, Sight};
+use crate::relief::gradient::Field;
 use crate::relief::{file, Params, Relief};
 use crate::scene::mesh::Mesh;
 use crate::simulate::{SimSummary, SimulateJob};
@@ -73,11 +74,13 @@ pub struct JobMade {
     pub dir: PathBuf,
 }
 
-/// What the camera saw, kept while only relief settings change.
+/// What the camera saw, kept while only relief settings change, and its
+/// shaped field, kept while the compression and the silhouette stay too.
 struct Seen {
     model_version: u64,
     key: ReliefSettings,
     sight: Arc<Sight>,
+    shaped: Option<((f64, f64), Arc<(Field, Vec<String>)>)>,
 }
 
 pub struct Studio {
@@ -258,24 +261,34 @@ impl Studio {
         let params = job.validate()?;
         let mut t = Timings::default();
         let key = sight_key(s);
+        let shaping = (params.alpha, params.silhouette);
         let cached = lock(&self.seen)
             .as_ref()
             .filter(|c| c.model_version == model.version && c.key == key)
-            .map(|c| c.sight.clone());
-        let sight = match cached {
-            Some(sight) => sight,
+            .map(|c| {
+                let shaped = c.shaped.as_ref().filter(|f| f.0 == shaping);
+                (c.sight.clone(), shaped.map(|f| f.1.clone()))
+            });
+        let (sight, shaped) = match cached {
+            Some(c) => c,
             None => {
                 let sight = Arc::new(job.see(model.mesh.as_deref(), &params, &mut t)?);
-                *lock(&self.seen) = Some(Seen {
-                    model_version: model.version,
-                    key,
-                    sight: sight.clone(),
-                });
-                sight
+                (sight, None)
             }
         };
         self.live(ticket)?;
-        let (relief, _field, warnings) = job.relief(&sight, &params, &mut t)?;
+        let shaped = match shaped {
+            Some(f) => f,
+            None => Arc::new(job.field(&sight, &params, &mut t)),
+        };
+        *lock(&self.seen) = Some(Seen {
+            model_version: model.version,
+            key,
+            sight,
+            shaped: Some((shaping, shaped.clone())),
+        });
+        self.live(ticket)?;
+        let (relief, warnings) = job.relief_from(&shaped.0, &shaped.1, &params, &mut t)?;
         let made = Arc::new(Made {
             model_version: model.version,
             settings: s.clone(),

@@ -163,7 +163,9 @@ const askJob = scheduler(async () => {
 function post(body) {
   return { method: 'POST', headers: { 'Content-Type': 'application/json' }, body: JSON.stringify(body) };
 }
-function frame() { return new Promise((r) => requestAnimationFrame(() => r())); }
+/// Resolves once the frame holding the last draw is on screen: the
+/// second animation frame after it.
+function frame() { return new Promise((r) => requestAnimationFrame(() => requestAnimationFrame(() => r()))); }
 
 function summary() {
   const h = S.job.head;
