@@ -380,3 +380,83 @@ impl Drop for Studio {
         let _ = std::fs::remove_dir_all(&self.dir);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stages(m: &Made) -> Vec<&str> {
+        m.timings.stages.iter().map(|s| s.0.as_str()).collect()
+    }
+
+    fn studio(name: &str) -> Studio {
+        let dir = std::env::temp_dir().join(format!("relievo-studio-unit-{name}"));
+        Studio::new(None, &dir).unwrap()
+    }
+
+    #[test]
+    fn only_the_camera_renders_again() {
+        let s = studio("reuse");
+        let mut r = ReliefSettings {
+            resolution: 64,
+            ..Default::default()
+        };
+        let first = s.relief(&r).unwrap();
+        assert!(stages(&first).contains(&"rasterize"));
+        // depth: neither rendered nor shaped again
+        r.depth = Some(2.0);
+        let second = s.relief(&r).unwrap();
+        assert_eq!(stages(&second), ["poisson"]);
+        assert_eq!(second.relief.depth_mm, 2.0);
+        // the same settings: the same relief, nothing made
+        assert!(Arc::ptr_eq(&second, &s.relief(&r).unwrap()));
+        // compression: shaped again from the same rendering
+        r.alpha = Some(8.0);
+        let third = s.relief(&r).unwrap();
+        assert!(stages(&third).contains(&"gradients") && !stages(&third).contains(&"rasterize"));
+        // the view: rendered again
+        r.yaw = 10.0;
+        assert!(stages(&s.relief(&r).unwrap()).contains(&"rasterize"));
+        // a new model: nothing of the old one is reused
+        s.open(None).unwrap();
+        assert!(stages(&s.relief(&r).unwrap()).contains(&"rasterize"));
+    }
+
+    #[test]
+    fn an_overtaken_request_is_dropped_not_queued() {
+        let s = Arc::new(studio("drop"));
+        let r = ReliefSettings {
+            resolution: 64,
+            ..Default::default()
+        };
+        // hold the bench so that both requests wait, the older first
+        let one = lock(&s.work);
+        let wait_for = |n: u64| {
+            while s.newest.load(SeqCst) < n {
+                std::thread::yield_now();
+            }
+        };
+        let before = s.newest.load(SeqCst);
+        let older = {
+            let (s, r) = (s.clone(), r.clone());
+            std::thread::spawn(move || s.relief(&r))
+        };
+        wait_for(before + 1);
+        let newer = {
+            let (s, mut r) = (s.clone(), r.clone());
+            r.depth = Some(1.0);
+            std::thread::spawn(move || s.relief(&r))
+        };
+        wait_for(before + 2);
+        drop(one);
+        assert!(matches!(older.join().unwrap(), Err(Fail::Superseded)));
+        let made = newer.join().unwrap().unwrap();
+        assert_eq!(made.relief.depth_mm, 1.0);
+        // a bad setting is an error, not a dropped request
+        let bad = ReliefSettings {
+            fade: Some("sideways".into()),
+            ..r
+        };
+        assert!(matches!(s.relief(&bad), Err(Fail::Bad(_))));
+    }
+}

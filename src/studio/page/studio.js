@@ -4,6 +4,8 @@
 
 const $ = (id) => document.getElementById(id);
 const D = Math.PI / 180;
+// vertices along a field's long side: drawn at once / once the view rests
+const COARSE = 64, FINE = 1024;
 
 // What the page holds; `window.studio` lets tests read the timings.
 const S = {
@@ -17,6 +19,8 @@ const S = {
   job: null,
   mesh: null,
   inputAt: 0,
+  // how long a coarse field takes from draw to screen (ms)
+  coarseMs: 50,
   stats: { relief: [], job: [] },
   drawn: 0,
 };
@@ -132,8 +136,10 @@ const askRelief = scheduler(async () => {
   if (!p.head.warnings.length) status(`relief ${p.head.pixels[0]} × ${p.head.pixels[1]} px, ${p.head.width_mm.toFixed(1)} × ${p.head.height_mm.toFixed(1)} × ${p.head.depth_mm.toFixed(2)} mm`);
   $('command').textContent = p.head.command + (S.job ? '\n' + S.job.head.command : '');
   gfx.setField('relief', p.head.w, p.head.h, p.arrays.heights, null);
+  const t1 = performance.now();
   draw();
   await frame();
+  S.coarseMs = 0.7 * S.coarseMs + 0.3 * (performance.now() - t1);
   S.stats.relief.push({ total_ms: performance.now() - asked, request_ms: got - t0, shown_ms: performance.now() - t0 });
   S.drawn++;
   if (S.tab === 'job') askJob();
@@ -240,16 +246,12 @@ const gfx = (() => {
   // resolution texture, so the light shows every sample
   const field = program(`
     layout(location = 0) in vec2 uv;
-    uniform sampler2D height;
+    layout(location = 1) in float h;
     uniform mat4 mvp;
     uniform vec4 rect;
     out vec2 vuv;
     out vec3 world;
     void main() {
-      ivec2 n = textureSize(height, 0);
-      ivec2 c = ivec2(uv * vec2(n - 1) + 0.5);
-      float h = texelFetch(height, c, 0).r;
-      if (isnan(h)) h = 0.0;
       world = vec3(rect.x + uv.x * rect.z, rect.y + (1.0 - uv.y) * rect.w, h);
       vuv = uv;
       gl_Position = mvp * vec4(world, 1.0);
@@ -316,7 +318,7 @@ const gfx = (() => {
     void main() { kind = p.w; gl_Position = mvp * vec4(p.xyz, 1.0); }`, `
     in float kind;
     out vec4 colour;
-    void main() { colour = kind > 0.5 ? vec4(0.05, 0.15, 0.45, 0.3) : vec4(0.95, 0.15, 0.1, 0.35); }`);
+    void main() { colour = kind > 0.5 ? vec4(0.05, 0.15, 0.45, 0.3) : vec4(0.95, 0.15, 0.1, 0.2); }`);
 
   const solid = program(`
     layout(location = 0) in vec3 p;
@@ -342,7 +344,8 @@ const gfx = (() => {
     return t;
   }
   const grids = {};
-  /// A grid of gw x gh vertices over the unit square, as triangles.
+  /// A grid of gw x gh vertices over the unit square, as triangles (its
+  /// buffers shared by every field of that size).
   function grid(gw, gh) {
     const key = gw + 'x' + gh;
     if (grids[key]) return grids[key];
@@ -358,30 +361,69 @@ const gfx = (() => {
       idx.set([a, a + 1, a + gw, a + 1, a + gw + 1, a + gw], k);
       k += 6;
     }
-    const vao = gl.createVertexArray();
-    gl.bindVertexArray(vao);
     const b = gl.createBuffer();
     gl.bindBuffer(gl.ARRAY_BUFFER, b);
     gl.bufferData(gl.ARRAY_BUFFER, uv, gl.STATIC_DRAW);
-    gl.enableVertexAttribArray(0);
-    gl.vertexAttribPointer(0, 2, gl.FLOAT, false, 0, 0);
     const e = gl.createBuffer();
     gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, e);
     gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, idx, gl.STATIC_DRAW);
-    gl.bindVertexArray(null);
-    return (grids[key] = { vao, count: idx.length });
+    return (grids[key] = { gw, gh, uv: b, idx: e, count: idx.length });
   }
 
+  /// A field's heights at a grid's vertices (nearest sample; the light
+  /// reads every sample from the texture), bound with the grid.
+  function fieldMesh(g, w, h, heights) {
+    const hv = new Float32Array(g.gw * g.gh);
+    for (let y = 0; y < g.gh; y++) {
+      const row = Math.round(y * (h - 1) / (g.gh - 1)) * w;
+      for (let x = 0; x < g.gw; x++) {
+        const v = heights[row + Math.round(x * (w - 1) / (g.gw - 1))];
+        hv[y * g.gw + x] = Number.isNaN(v) ? 0 : v;
+      }
+    }
+    const vao = gl.createVertexArray();
+    gl.bindVertexArray(vao);
+    gl.bindBuffer(gl.ARRAY_BUFFER, g.uv);
+    gl.enableVertexAttribArray(0);
+    gl.vertexAttribPointer(0, 2, gl.FLOAT, false, 0, 0);
+    const hb = gl.createBuffer();
+    gl.bindBuffer(gl.ARRAY_BUFFER, hb);
+    gl.bufferData(gl.ARRAY_BUFFER, hv, gl.STATIC_DRAW);
+    gl.enableVertexAttribArray(1);
+    gl.vertexAttribPointer(1, 1, gl.FLOAT, false, 0, 0);
+    gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, g.idx);
+    gl.bindVertexArray(null);
+    return { vao, hb, count: g.count };
+  }
+
+  /// A field's coarse mesh is drawn at once; the fine one when the view
+  /// rests (software GL takes long over many triangles).
   function setField(name, w, h, heights, dev) {
     const old = fields[name];
-    if (old) { gl.deleteTexture(old.height); if (old.dev) gl.deleteTexture(old.dev); }
-    const gw = Math.max(2, Math.min(w, 640)), gh = Math.max(2, Math.round(gw * h / w));
-    fields[name] = {
-      w, h,
-      height: texture(w, h, heights),
-      dev: dev ? texture(w, h, dev) : null,
-      grid: grid(gw, gh),
-    };
+    if (old) {
+      gl.deleteTexture(old.height);
+      if (old.dev) gl.deleteTexture(old.dev);
+      for (const m of [old.coarse, old.fine]) if (m) { gl.deleteVertexArray(m.vao); gl.deleteBuffer(m.hb); }
+    }
+    const side = (n) => { const gw = Math.max(2, Math.min(w, n)); return grid(gw, Math.max(2, Math.round(gw * h / w))); };
+    const f = { w, h, heights, height: texture(w, h, heights), dev: dev ? texture(w, h, dev) : null };
+    f.coarse = fieldMesh(side(COARSE), w, h, heights);
+    f.fine = null;
+    f.side = side;
+    fields[name] = f;
+  }
+  /// The detailed mesh: as many vertices as this machine draws in about
+  /// 150 ms, judged by how long the coarse mesh took (a GPU takes the
+  /// most, software GL on two cores about 1.5x the coarse one's).
+  function fine(f) {
+    const n = Math.round(Math.min(FINE, COARSE * Math.sqrt(150 / Math.max(S.coarseMs, 1))));
+    if (n <= COARSE || (f.w <= COARSE && f.h <= COARSE)) return f.coarse;
+    if (!f.fine || f.fine.n !== n) {
+      if (f.fine) { gl.deleteVertexArray(f.fine.vao); gl.deleteBuffer(f.fine.hb); }
+      f.fine = fieldMesh(f.side(n), f.w, f.h, f.heights);
+      f.fine.n = n;
+    }
+    return f.fine;
   }
 
   let moves = null;
@@ -432,7 +474,7 @@ const gfx = (() => {
     return w / Math.max(h, 1);
   }
 
-  function drawField(f, rect, withMoves) {
+  function drawField(f, rect, withMoves, detailed) {
     const aspect = size();
     const cx = rect[0] + rect[2] / 2, cy = rect[1] + rect[3] / 2;
     // far enough that the panel fills the view with a margin
@@ -461,8 +503,9 @@ const gfx = (() => {
     gl.activeTexture(gl.TEXTURE1);
     gl.bindTexture(gl.TEXTURE_2D, f.dev || f.height);
     gl.uniform1i(field.u.dev, 1);
-    gl.bindVertexArray(f.grid.vao);
-    gl.drawElements(gl.TRIANGLES, f.grid.count, gl.UNSIGNED_INT, 0);
+    const m = detailed ? fine(f) : f.coarse;
+    gl.bindVertexArray(m.vao);
+    gl.drawElements(gl.TRIANGLES, m.count, gl.UNSIGNED_INT, 0);
     if (withMoves && moves && moves.count) {
       gl.useProgram(lines.p);
       gl.uniformMatrix4fv(lines.u.mvp, false, mvp);
@@ -556,8 +599,13 @@ function lookAt(eye, at, up) {
 }
 function norm(v) { const l = Math.hypot(...v) || 1; return v.map((x) => x / l); }
 
-function draw() {
+let restTimer = 0;
+/// Draw the view now (coarse), and again in detail once nothing changed
+/// for a moment.
+function draw(detailed) {
   if (!gfx) return;
+  clearTimeout(restTimer);
+  if (!detailed) restTimer = setTimeout(() => draw(true), 400);
   $('legend').style.display = S.tab === 'job' && S.job ? 'block' : 'none';
   $('look-box').style.display = S.tab === 'relief' ? '' : 'none';
   $('moves-box').style.display = S.tab === 'job' ? '' : 'none';
@@ -565,10 +613,10 @@ function draw() {
     gfx.drawMesh(reliefSettings());
   } else if (S.tab === 'relief' && gfx.fields.relief && S.relief) {
     const h = S.relief.head;
-    gfx.drawField(gfx.fields.relief, [0, 0, h.width_mm, h.height_mm], false);
+    gfx.drawField(gfx.fields.relief, [0, 0, h.width_mm, h.height_mm], false, detailed);
   } else if (S.tab === 'job' && gfx.fields.job && S.job) {
     const st = S.job.head.stock;
-    gfx.drawField(gfx.fields.job, [st.x0, st.y0, st.width, st.height], $('show-moves').checked);
+    gfx.drawField(gfx.fields.job, [st.x0, st.y0, st.width, st.height], $('show-moves').checked, detailed);
   } else {
     gfx.gl.clearColor(0.23, 0.22, 0.21, 1);
     gfx.gl.clear(gfx.gl.COLOR_BUFFER_BIT);
@@ -604,8 +652,8 @@ function wire() {
     askJobSoon();
   });
   for (const b of document.querySelectorAll('#tabs button')) b.addEventListener('click', () => tab(b.dataset.tab));
-  $('look').addEventListener('input', draw);
-  $('show-moves').addEventListener('input', draw);
+  $('look').addEventListener('input', () => draw());
+  $('show-moves').addEventListener('input', () => draw());
   $('demo').addEventListener('click', async () => {
     try { await model(await call('/api/demo', { method: 'POST' })); } catch (e) { status(e.message, true); }
   });
@@ -618,7 +666,7 @@ function wire() {
     if (e.dataTransfer.files[0]) upload(e.dataTransfer.files[0]);
   });
   $('copy').addEventListener('click', () => navigator.clipboard && navigator.clipboard.writeText($('command').textContent));
-  window.addEventListener('resize', draw);
+  window.addEventListener('resize', () => draw());
   pointer();
 }
 
