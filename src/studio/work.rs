@@ -80,8 +80,11 @@ struct Seen {
     model_version: u64,
     key: ReliefSettings,
     sight: Arc<Sight>,
-    shaped: Option<((f64, f64), Arc<(Field, Vec<String>)>)>,
+    shaped: Option<((f64, f64), Arc<Shaped>)>,
 }
+
+/// A shaped field and the object names its ids refer to.
+type Shaped = (Field, Vec<String>);
 
 pub struct Studio {
     /// Scratch folder: uploads, the job's files.
