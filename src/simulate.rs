@@ -78,26 +78,14 @@ pub struct SimSummary {
     pub timings: Timings,
 }
 
-/// Colour the deviation: red = gouge, blue = residual (each scaled to its
-/// own maximum), grey = within 1 micrometre, black = outside the relief.
-fn deviation_png(dev: &Grid<f32>, gouge: f64, residual: f64) -> Vec<u8> {
-    let mut rgb = Vec::with_capacity(dev.data.len() * 3);
-    for &d in &dev.data {
-        let d = d as f64;
-        let px = if d.is_nan() {
-            [0, 0, 0]
-        } else if d < -1e-3 {
-            let k = (-d / gouge.max(1e-3)).min(1.0);
-            [255, (200.0 * (1.0 - k)) as u8, (200.0 * (1.0 - k)) as u8]
-        } else if d > 1e-3 {
-            let k = (d / residual.max(1e-3)).min(1.0);
-            [(200.0 * (1.0 - k)) as u8, (200.0 * (1.0 - k)) as u8, 255]
-        } else {
-            [200, 200, 200]
-        };
-        rgb.extend(px);
-    }
-    file::png_rgb(dev.w, dev.h, &rgb)
+/// The deviation map with its legend (`sim::map`): residual as its
+/// envelope over the finishing stepover (mm, from the job's header) so
+/// that scallops sampled by the cells do not beat into bands.
+fn deviation_png(dev: &Grid<f32>, gouge: f64, residual: f64, cell: f64, stepover: Option<f64>) -> Vec<u8> {
+    let k = stepover.map_or(1, |s| (s / cell).ceil().max(1.0) as usize);
+    let shown = sim::map::envelope(dev, k);
+    let (w, h, rgb) = sim::map::picture(&shown, sim::map::nice_scale(gouge.max(residual)));
+    file::png_rgb(w, h, &rgb)
 }
 
 /// What a cut's bottom may hide between stock cells by default (mm).
@@ -160,12 +148,16 @@ impl SimulateJob {
         }
         let mut progs = Vec::new();
         let mut frame = None;
+        let mut stepover: Option<f64> = None;
         for job in &self.jobs {
             let what = job.display().to_string();
             let text = t.time("read job", || {
                 crate::input::read_text(job, crate::input::MAX_FILE)
             })?;
             let f = Frame::find(&text).map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            if let Some(s) = sim::map::finishing_stepover(&text) {
+                stepover = Some(stepover.map_or(s, |m: f64| m.max(s)));
+            }
             // a file placed by its own frame (a tile, say) moves into the
             // first file's coordinates
             let mut offset = glam::DVec3::ZERO;
@@ -344,7 +336,7 @@ impl SimulateJob {
                 out.add(p, j);
             }
             if let Some(p) = &self.deviation {
-                out.add(p, deviation_png(&dev, gouge, residual));
+                out.add(p, deviation_png(&dev, gouge, residual, stock.pitch, stepover));
             }
         });
         t.time("write", || out.commit())?;

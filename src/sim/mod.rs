@@ -21,6 +21,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 pub mod engage;
+pub mod map;
 
 /// Stretches of a program cut by one tool: (first segment, end, tool).
 pub type ToolRuns = Vec<(usize, usize, Tool)>;

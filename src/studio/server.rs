@@ -292,7 +292,13 @@ fn job_packet(j: &super::work::JobMade) -> Reply {
     let rep = &j.sim.report;
     let st = j.sim.stock;
     let cut = shrink(&j.sim.cut, VIEW_MAX, mean);
-    let dev = shrink(&j.sim.deviation, VIEW_MAX, extreme);
+    // residual as its envelope over a stepover: no beat of scallops and cells
+    let k = (s.stepover_mm / st.pitch).ceil().max(1.0) as usize;
+    let dev = shrink(
+        &crate::sim::map::envelope(&j.sim.deviation, k),
+        VIEW_MAX,
+        extreme,
+    );
     // moves as pairs of points (x, y, z, 0 = rapid / 1 = feed)
     let segs = &j.program.segments;
     let stride = segs.len().div_ceil(MAX_DRAWN_MOVES).max(1);
