@@ -79,12 +79,16 @@ pub struct SimSummary {
 }
 
 /// The deviation map with its legend (`sim::map`): residual as its
-/// envelope over the finishing stepover (mm, from the job's header) so
+/// mean over the finishing stepover (mm, from the job's header) so
 /// that scallops sampled by the cells do not beat into bands.
-fn deviation_png(dev: &Grid<f32>, gouge: f64, residual: f64, cell: f64, stepover: Option<f64>) -> Vec<u8> {
-    let k = stepover.map_or(1, |s| (s / cell).ceil().max(1.0) as usize);
-    let shown = sim::map::envelope(dev, k);
-    let (w, h, rgb) = sim::map::picture(&shown, sim::map::nice_scale(gouge.max(residual)));
+fn deviation_png(dev: &Grid<f32>, gouge: f64, cell: f64, stepover: Option<f64>) -> Vec<u8> {
+    let shown = sim::map::smoothed(dev, stepover.map_or(1.0, |s| s / cell));
+    let most = shown
+        .data
+        .iter()
+        .filter(|d| d.is_finite())
+        .fold(0.0f64, |m, d| m.max(*d as f64));
+    let (w, h, rgb) = sim::map::picture(&shown, sim::map::nice_scale(gouge.max(most)));
     file::png_rgb(w, h, &rgb)
 }
 
@@ -336,7 +340,7 @@ impl SimulateJob {
                 out.add(p, j);
             }
             if let Some(p) = &self.deviation {
-                out.add(p, deviation_png(&dev, gouge, residual, stock.pitch, stepover));
+                out.add(p, deviation_png(&dev, gouge, stock.pitch, stepover));
             }
         });
         t.time("write", || out.commit())?;

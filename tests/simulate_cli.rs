@@ -380,3 +380,59 @@ fn malformed_jobs_fail_with_the_line_and_leave_nothing() {
     assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("tool"));
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// `--deviation`: the map has its scale under it, and the scallops of a
+/// raster whose stepover (0.37 mm) beats with the cells (0.1 mm) do not
+/// show as bands: the residual is drawn as its envelope over a stepover.
+#[test]
+fn the_deviation_map_has_a_scale_and_no_bands() {
+    let d = scratch("sim-map");
+    // a flat 0.5 mm below the stock top
+    let relief = d.join("flat.png");
+    write_png16(&relief, 300, 100, &vec![0u16; 300 * 100]);
+    let side = serde_json::json!({"format": "relievo-relief/1", "width_mm": 30.0,
+        "height_mm": 10.0, "depth_mm": 0.5, "pixels": [300, 100]});
+    std::fs::write(relief.with_extension("json"), side.to_string()).unwrap();
+    let nc = d.join("job.nc");
+    ok(&run(&[
+        "toolpath",
+        relief.to_str().unwrap(),
+        "--stepover",
+        "0.37",
+        "-o",
+        nc.to_str().unwrap(),
+        "-q",
+    ]));
+    let map = d.join("dev.png");
+    let report = simulate_report(
+        &nc,
+        &relief,
+        &d.join("cut.png"),
+        &["--oversample", "1", "--deviation", map.to_str().unwrap()],
+    );
+    let left = report["max_residual_mm"].as_f64().unwrap();
+    let img = image::open(&map).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (300, 130));
+    // the scallops: 0.37^2 / (8 x 1.5875) = 0.0108 mm, blue on a 0.02 scale
+    assert!((left - 0.0108).abs() < 0.002, "residual {left}");
+    // grey (199) to blue takes the red channel down to 25 at the scale:
+    // the raw scallops would span 199..105 here
+    let reds: Vec<u8> = (20..80)
+        .flat_map(|y| (20..280).map(move |x| (x, y)))
+        .map(|(x, y)| img.get_pixel(x, y)[0])
+        .collect();
+    let (lo, hi) = (*reds.iter().min().unwrap(), *reds.iter().max().unwrap());
+    eprintln!("red over the flat: {lo}..{hi}");
+    assert!(hi - lo <= 15, "bands: red {lo}..{hi}");
+    assert!(
+        img.get_pixel(150, 50)[0] < 150,
+        "the scallops are not shown"
+    );
+    // the legend: red to blue, and its figures in white
+    assert!(img.get_pixel(9, 108)[0] > 200 && img.get_pixel(290, 108)[2] > 200);
+    let white = (115..130)
+        .flat_map(|y| (0..300).map(move |x| (x, y)))
+        .filter(|&(x, y)| img.get_pixel(x, y).0 == [255, 255, 255])
+        .count();
+    assert!(white > 50, "no figures under the bar");
+}

@@ -292,10 +292,9 @@ fn job_packet(j: &super::work::JobMade) -> Reply {
     let rep = &j.sim.report;
     let st = j.sim.stock;
     let cut = shrink(&j.sim.cut, VIEW_MAX, mean);
-    // residual as its envelope over a stepover: no beat of scallops and cells
-    let k = (s.stepover_mm / st.pitch).ceil().max(1.0) as usize;
+    // residual as its mean over a stepover: no beat of scallops and cells
     let dev = shrink(
-        &crate::sim::map::envelope(&j.sim.deviation, k),
+        &crate::sim::map::smoothed(&j.sim.deviation, s.stepover_mm / st.pitch),
         VIEW_MAX,
         extreme,
     );

@@ -185,9 +185,15 @@ function summary() {
     (h.moves_drawn < h.moves ? `<br>(drawing ${h.moves_drawn.toLocaleString()} of ${h.moves.toLocaleString()} moves)` : '');
 }
 
-/// The deviation scale: the residual's maximum, rounded up to 1, 2 or 5.
+/// The deviation scale: the largest deviation shown (material left as its
+/// mean over a stepover, or the gouge), rounded up to 1, 2 or 5.
 function devScale() {
-  const m = Math.max(S.job.head.residual_mm[0], S.job.head.gouge_mm, 0.01);
+  if (S.job.devMax === undefined) {
+    let m = 0;
+    for (const d of S.job.arrays.deviation) if (d > m) m = d;
+    S.job.devMax = m;
+  }
+  const m = Math.max(S.job.devMax, S.job.head.gouge_mm, 0.01);
   const e = Math.pow(10, Math.floor(Math.log10(m)));
   for (const k of [1, 2, 5, 10]) if (k * e >= m) return k * e;
   return 10 * e;
