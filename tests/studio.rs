@@ -261,6 +261,19 @@ fn bad_uploads_and_requests_leave_the_studio_serving() {
         let s = status(&b);
         (!s.1 && s.0.starts_with("relief")).then_some(())
     });
+    // and a good file still opens: a depth picture (a dome)
+    let dome = dir.join("dome.png");
+    let v: Vec<u16> = (0..64 * 48)
+        .map(|i| {
+            let (x, y) = ((i % 64) as f64 - 32.0, (i / 64) as f64 - 24.0);
+            (65535.0 * (1.0 - (x * x + y * y) / 800.0).max(0.0)) as u16
+        })
+        .collect();
+    common::write_png16(&dome, 64, 48, &v);
+    b.keys("#file", dome.to_str().unwrap());
+    b.wait("the dome's relief", 60, || {
+        (b.text("#model-name").starts_with("dome.png") && relief_at(&b, 64)).then_some(())
+    });
     assert!(studio.alive(), "the studio died");
     let r = http
         .get(format!("{}/api/model", studio.url))

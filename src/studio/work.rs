@@ -126,6 +126,7 @@ impl Studio {
     /// A studio on `model` (`None` = the demo scene), its scratch files in
     /// a new folder under `dir`.
     pub fn new(model: Option<&Path>, dir: &Path) -> Result<Studio> {
+        sweep(dir);
         let dir = dir.join(format!("relievo-studio-{}", std::process::id()));
         std::fs::create_dir_all(&dir).map_err(|e| Error(format!("{}: {e}", dir.display())))?;
         let s = Studio {
@@ -378,6 +379,29 @@ impl Studio {
     }
 }
 
+/// Remove the scratch folders of studios that no longer run (one stopped
+/// by Ctrl-C leaves its uploads behind).
+fn sweep(base: &Path) {
+    let Ok(entries) = std::fs::read_dir(base) else {
+        return;
+    };
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().to_string();
+        let Some(pid) = name
+            .strip_prefix("relievo-studio-")
+            .and_then(|p| p.parse::<i32>().ok())
+        else {
+            continue;
+        };
+        // SAFETY: signal 0 only asks whether the process exists
+        let gone = unsafe { libc::kill(pid, 0) } == -1
+            && std::io::Error::last_os_error().raw_os_error() == Some(libc::ESRCH);
+        if gone {
+            let _ = std::fs::remove_dir_all(e.path());
+        }
+    }
+}
+
 impl Drop for Studio {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.dir);
@@ -423,6 +447,17 @@ mod tests {
         // a new model: nothing of the old one is reused
         s.open(None).unwrap();
         assert!(stages(&s.relief(&r).unwrap()).contains(&"rasterize"));
+    }
+
+    #[test]
+    fn a_dead_studio_s_scratch_is_swept() {
+        let base = std::env::temp_dir().join("relievo-studio-unit-sweep");
+        let dead = base.join("relievo-studio-999999999");
+        std::fs::create_dir_all(dead.join("upload-1")).unwrap();
+        std::fs::write(dead.join("upload-1/a.obj"), "v 0 0 0").unwrap();
+        let s = Studio::new(None, &base).unwrap();
+        assert!(!dead.exists());
+        assert!(s.dir.exists());
     }
 
     #[test]

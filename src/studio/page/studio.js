@@ -615,6 +615,9 @@ function draw(detailed) {
   $('legend').style.display = S.tab === 'job' && S.job ? 'block' : 'none';
   $('look-box').style.display = S.tab === 'relief' ? '' : 'none';
   $('moves-box').style.display = S.tab === 'job' ? '' : 'none';
+  const picture = S.tab === 'model' && S.model && S.model.picture;
+  $('note').style.display = picture ? 'block' : 'none';
+  $('note').textContent = picture ? 'a depth or normal-map picture: its relief is in the Relief view' : '';
   if (S.tab === 'model') {
     gfx.drawMesh(reliefSettings());
   } else if (S.tab === 'relief' && gfx.fields.relief && S.relief) {
