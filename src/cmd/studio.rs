@@ -27,6 +27,12 @@ pub fn run(args: StudioArgs, quiet: bool) -> relievo::Result<()> {
             return Err(relievo::Error(format!("{}: no such file", m.display())));
         }
     }
+    if !args.host.is_loopback() {
+        eprintln!(
+            "warning: listening on {}: anyone who reaches it can use the studio and download its files",
+            args.host
+        );
+    }
     let open = args.open;
     relievo::studio::serve(
         args.model.as_deref(),
