@@ -95,6 +95,7 @@ pub struct Studio {
     job: Mutex<Option<Arc<JobMade>>>,
     newest: AtomicU64,
     versions: AtomicU64,
+    uploads: AtomicU64,
     work: Mutex<()>,
 }
 
@@ -142,6 +143,7 @@ impl Studio {
             job: Mutex::new(None),
             newest: AtomicU64::new(0),
             versions: AtomicU64::new(0),
+            uploads: AtomicU64::new(0),
             work: Mutex::new(()),
         };
         s.open(model.map(|p| (p.to_path_buf(), p.display().to_string())))?;
@@ -183,7 +185,13 @@ impl Studio {
         });
         // whatever runs now is about the old model
         self.newest.fetch_add(1, SeqCst);
-        *lock(&self.model) = m.clone();
+        let old = std::mem::replace(&mut *lock(&self.model), m.clone());
+        // an upload replaced is deleted (its mesh, if any, is in memory)
+        if let Some(dir) = old.path.as_deref().and_then(Path::parent) {
+            if dir.starts_with(&self.dir) && m.path.as_deref().and_then(Path::parent) != Some(dir) {
+                let _ = std::fs::remove_dir_all(dir);
+            }
+        }
         Ok(m)
     }
 
@@ -204,7 +212,7 @@ impl Studio {
         if bytes.is_empty() {
             bail!("{base}: the file is empty");
         }
-        let n = self.versions.load(SeqCst) + 1;
+        let n = self.uploads.fetch_add(1, SeqCst) + 1;
         let safe: String = base
             .chars()
             .map(|c| {
@@ -447,6 +455,24 @@ mod tests {
         // a new model: nothing of the old one is reused
         s.open(None).unwrap();
         assert!(stages(&s.relief(&r).unwrap()).contains(&"rasterize"));
+    }
+
+    #[test]
+    fn an_upload_replaced_is_deleted() {
+        let s = studio("uploads");
+        let obj = b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+        let first = s.upload("a.obj", obj).unwrap();
+        let first = first.path.clone().unwrap();
+        assert!(first.exists());
+        let second = s.upload("b b.obj", obj).unwrap();
+        assert_eq!(second.name.as_deref(), Some("b b.obj"));
+        assert!(!first.exists() && second.path.as_ref().unwrap().exists());
+        // a refused upload leaves the bench and its file as they were
+        assert!(s.upload("c.obj", b"garbage").is_err());
+        assert!(second.path.as_ref().unwrap().exists());
+        assert_eq!(s.model().version, second.version);
+        s.open(None).unwrap();
+        assert!(!second.path.as_ref().unwrap().exists());
     }
 
     #[test]
