@@ -50,6 +50,15 @@ impl Reply {
             attachment: None,
         }
     }
+    /// One of the page's own files, shown in place.
+    fn file_inline(kind: &'static str, text: &str) -> Reply {
+        Reply {
+            status: 200,
+            kind,
+            body: text.as_bytes().to_vec(),
+            attachment: None,
+        }
+    }
     fn file(kind: &'static str, name: &str, body: Vec<u8>) -> Reply {
         Reply {
             status: 200,
@@ -225,17 +234,6 @@ fn route(rq: &mut Request, studio: &Studio) -> Reply {
         }
         (Method::Get, _) | (Method::Post, _) => Reply::error(404, format!("no such page: {path}")),
         (m, _) => Reply::error(405, format!("{m} is not served")),
-    }
-}
-
-impl Reply {
-    fn file_inline(kind: &'static str, text: &str) -> Reply {
-        Reply {
-            status: 200,
-            kind,
-            body: text.as_bytes().to_vec(),
-            attachment: None,
-        }
     }
 }
 

@@ -37,7 +37,8 @@ pub struct Model {
     /// As the command line names it (`None` = the demo scene).
     pub name: Option<String>,
     pub path: Option<PathBuf>,
-    /// Loaded once (`None` for the demo scene... loaded too, and for PNGs).
+    /// The mesh, loaded once (the demo scene's too); `None` for a PNG,
+    /// which is read where it is seen.
     pub mesh: Option<Arc<Mesh>>,
     /// Bumped by every new model, so nothing made of the last one is reused.
     pub version: u64,
@@ -100,7 +101,7 @@ pub struct Studio {
 }
 
 /// A lock that a panicked holder left usable (its data is replaced whole).
-pub fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
