@@ -97,6 +97,23 @@ impl Tool {
         }
     }
 
+    /// The profile at sqrt(d2) from the axis (infinite beyond the
+    /// radius): for a ball one square root instead of two.
+    #[inline]
+    pub fn profile_sq(&self, d2: f64) -> f64 {
+        match *self {
+            Tool::Ball { d } => {
+                let rr = d / 2.0;
+                if d2 > rr * rr {
+                    f64::INFINITY
+                } else {
+                    rr - (rr * rr - d2).sqrt()
+                }
+            }
+            _ => self.profile(d2.sqrt()),
+        }
+    }
+
     /// A lower bound of the profile at sqrt(d2) from the axis, cheap
     /// enough for pruning: for a ball its osculating paraboloid, which
     /// lies inside the sphere.

@@ -1281,22 +1281,27 @@ impl ToolpathJob {
                 }
             }
         }
-        let mut out = Vec::new();
-        let mut raw = 0;
-        for (whole, g) in groups {
-            let cl = raster::drop_rows(hf, tool, &g, floor);
-            raw += cl.iter().map(Vec::len).sum::<usize>();
-            let main = match (self.direction, whole) {
-                (None, true) => vec![raster::zigzag(hf, tool, &cl, floor, tol, self.arcs)],
-                (None, false) => cl.iter().map(|c| raster::thin(c, tol, self.arcs)).collect(),
-                (Some(_), _) => raster::one_way(&cl, climb, tol, self.arcs),
-            };
-            for c in &main {
-                let d = path::check_and_refine(hf, tool, c, floor, tol);
-                out.push(d);
-            }
-        }
-        (out, raw)
+        // every group at once: the pieces beside a keep-out are single
+        // rows, each too small to keep both cores busy alone
+        let done: Vec<(Vec<Vec<DVec3>>, usize)> = groups
+            .into_par_iter()
+            .map(|(whole, g)| {
+                let cl = raster::drop_rows(hf, tool, &g, floor);
+                let raw = cl.iter().map(Vec::len).sum::<usize>();
+                let main = match (self.direction, whole) {
+                    (None, true) => vec![raster::zigzag(hf, tool, &cl, floor, tol, self.arcs)],
+                    (None, false) => cl.iter().map(|c| raster::thin(c, tol, self.arcs)).collect(),
+                    (Some(_), _) => raster::one_way(&cl, climb, tol, self.arcs),
+                };
+                let checked = main
+                    .iter()
+                    .map(|c| path::check_and_refine(hf, tool, c, floor, tol))
+                    .collect();
+                (checked, raw)
+            })
+            .collect();
+        let raw = done.iter().map(|d| d.1).sum();
+        (done.into_iter().flat_map(|d| d.0).collect(), raw)
     }
 
     /// Feeds and speeds for `tool`: flags, else the material's entry for

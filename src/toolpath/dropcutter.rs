@@ -157,11 +157,13 @@ impl HeightField {
     }
 
     /// The cells of the block of `side` x `side` cells (1 or 2) from cell
-    /// `first`: their corners' contacts computed once, then each cell's
-    /// exact contact only where it may beat `best`. Inside a triangle
-    /// whose corners are all in reach the tool can sink below the best
-    /// corner by at most the Jensen gap of its profile, curvature x
-    /// diameter^2 / 8; a cell at the rim is bounded by its highest corner.
+    /// `first`, each first bounded cheaply (its highest corner minus the
+    /// profile at its nearest point); the corners' contacts of a cell that
+    /// passes are computed (once per block) and bound it closely: inside
+    /// a triangle whose corners are all in reach the tool can sink below
+    /// the best corner by at most the Jensen gap of its profile, curvature
+    /// x diameter^2 / 8. Only a cell that may still beat `best` gets its
+    /// exact contact.
     #[allow(clippy::too_many_arguments)]
     fn cells(
         &self,
@@ -179,46 +181,48 @@ impl HeightField {
         let l = &self.lattice;
         let w = self.vz.w;
         let r2 = r * r;
-        // (distance^2, contact) of the corners; -inf out of reach
-        let mut v = [[(0.0f64, f64::NEG_INFINITY); 3]; 3];
-        for (bj, row) in v.iter_mut().enumerate().take(nj + 1) {
-            let dy = l.vy(j0 + bj) - y;
-            for (ai, c) in row.iter_mut().enumerate().take(ni + 1) {
-                let dx = l.vx(i0 + ai) - x;
+        // (distance^2, contact) of the corners, computed when first
+        // needed (NaN until then); -inf out of reach
+        let mut v = [[(f64::NAN, f64::NEG_INFINITY); 3]; 3];
+        let mut corner = |ai: usize, bj: usize| -> (f64, f64) {
+            let c = &mut v[bj][ai];
+            if c.0.is_nan() {
+                let (dx, dy) = (l.vx(i0 + ai) - x, l.vy(j0 + bj) - y);
                 let d2 = dx * dx + dy * dy;
                 c.0 = d2;
                 if d2 <= r2 {
-                    c.1 = self.vz.data[(j0 + bj) * w + i0 + ai] - tool.profile(d2.sqrt());
+                    c.1 = self.vz.data[(j0 + bj) * w + i0 + ai] - tool.profile_sq(d2);
                 }
             }
-        }
-        let mut tops = [(f64::NEG_INFINITY, 0.0f64, false); 4];
-        for bj in 0..nj {
-            for ai in 0..ni {
-                let cs = [v[bj][ai], v[bj][ai + 1], v[bj + 1][ai], v[bj + 1][ai + 1]];
-                let top = cs.iter().fold(f64::NEG_INFINITY, |m, c| m.max(c.1));
-                let far2 = cs.iter().fold(0.0f64, |m, c| m.max(c.0));
-                tops[bj * 2 + ai] = (top, far2, far2 <= r2);
-                if top > *best {
-                    (*best, *contact) = (top, (i0 + ai, j0 + bj));
-                }
-            }
-        }
+            *c
+        };
         for bj in 0..nj {
             for ai in 0..ni {
                 let (i, j) = (i0 + ai, j0 + bj);
-                let (top, far2, all_in) = tops[bj * 2 + ai];
                 let (x0, x1, yt, yb) = (l.vx(i), l.vx(i + 1), l.vy(j), l.vy(j + 1));
                 let dx = (x0 - x).max(0.0).max(x - x1);
                 let dy = (yb - y).max(0.0).max(y - yt);
-                let near = (dx * dx + dy * dy).sqrt();
-                let bound = if all_in {
-                    let diam2 = (x1 - x0) * (x1 - x0) + (yt - yb) * (yt - yb);
-                    top + tool.curvature_bound(near, far2.sqrt()) * diam2 / 8.0
-                } else if near <= r {
-                    self.levels[0].get(i, j) - tool.profile(near)
-                } else {
+                let near2 = dx * dx + dy * dy;
+                let high = *self.levels[0].get(i, j);
+                if near2 > r2 || high - tool.profile_below(near2) <= *best {
                     continue;
+                }
+                let cs = [
+                    corner(ai, bj),
+                    corner(ai + 1, bj),
+                    corner(ai, bj + 1),
+                    corner(ai + 1, bj + 1),
+                ];
+                let top = cs.iter().fold(f64::NEG_INFINITY, |m, c| m.max(c.1));
+                let far2 = cs.iter().fold(0.0f64, |m, c| m.max(c.0));
+                if top > *best {
+                    (*best, *contact) = (top, (i, j));
+                }
+                let bound = if far2 <= r2 {
+                    let diam2 = (x1 - x0) * (x1 - x0) + (yt - yb) * (yt - yb);
+                    top + tool.curvature_bound(near2.sqrt(), far2.sqrt()) * diam2 / 8.0
+                } else {
+                    high - tool.profile_sq(near2)
                 };
                 if bound > *best {
                     let z = self.cell_contact(tool, r, i, j, x, y, *best);

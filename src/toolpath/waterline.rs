@@ -112,12 +112,13 @@ pub fn node_pitch(hf: &HeightField, tool: &Tool) -> f64 {
 }
 
 /// Where a contour point's exact crossing is still to be found: the grid
-/// edge's low and high ends and the grid's linear guess along it.
+/// edge's low and high ends and the CL heights there.
 #[derive(Clone, Copy, Debug)]
 pub struct Crossing {
     lo: (f64, f64),
     hi: (f64, f64),
-    guess: f64,
+    /// The CL heights the grid holds at `lo` and `hi`.
+    z: (f64, f64),
 }
 
 /// A grid edge: from node (i, j) one step in +x (`vertical` false) or +y.
@@ -276,7 +277,8 @@ pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
                 lo.1 + (hi.1 - lo.1) * guess,
                 level,
             );
-            (e, (at, slope, Crossing { lo, hi, guess }))
+            let z = (zl, zh);
+            (e, (at, slope, Crossing { lo, hi, z }))
         })
         .collect();
     let mut seen = std::collections::HashSet::new();
@@ -317,12 +319,21 @@ pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
 /// (`crossing`): done after `parts`, so that stretches left to the raster
 /// cost no search.
 pub fn place(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour {
+    let mut near = Near::default();
     let pts = c
         .pts
         .iter()
         .zip(&c.pending)
         .map(|(p, cr)| match cr {
-            Some(cr) => crossing(hf, tool, floor, p.z, cr.lo, cr.hi, cr.guess),
+            Some(cr) => crossing(
+                hf,
+                tool,
+                floor,
+                p.z,
+                (cr.lo, cr.z.0),
+                (cr.hi, cr.z.1),
+                &mut near,
+            ),
             None => *p,
         })
         .collect();
@@ -334,25 +345,25 @@ pub fn place(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour 
     }
 }
 
-/// The point between `lo` (CL below the level) and `hi` (at or above it)
-/// where the exact CL surface crosses `level`: bisection over points on the
-/// G-code grid (at a jump of the CL surface 0.1 um sideways matters),
-/// ending on the low side so the tool at the level touches nothing there.
+/// The point between `lo` (CL below the level) and `hi` (at or above it),
+/// given with the CL heights expected there, where the exact CL surface
+/// crosses `level`: regula falsi (Illinois) over points on the G-code grid
+/// (at a jump of the CL surface 0.1 um sideways matters), aimed a little
+/// below the level and always keeping a bracket, so it ends on the low
+/// side within LEVEL_TOL in a few drops where the surface is smooth and
+/// no worse than bisection where it jumps.
 fn crossing(
     hf: &HeightField,
     tool: &Tool,
     floor: f64,
     level: f64,
-    lo: (f64, f64),
-    hi: (f64, f64),
-    guess: f64,
+    (lo, zlo): ((f64, f64), f64),
+    (hi, zhi): ((f64, f64), f64),
+    near: &mut Near,
 ) -> DVec3 {
-    // successive probes are close: each starts from the last contact
-    let mut stack = Vec::new();
-    let mut hint = None;
-    let mut cl = |x: f64, y: f64| match hf.drop_from(tool, x, y, hint, &mut stack) {
+    let mut cl = |x: f64, y: f64| match hf.drop_from(tool, x, y, near.hint, &mut near.stack) {
         Some((z, c)) => {
-            hint = Some(c);
+            near.hint = Some(c);
             z.max(floor)
         }
         None => floor,
@@ -363,37 +374,67 @@ fn crossing(
             snap(lo.1 + (hi.1 - lo.1) * t),
         )
     };
-    let (mut a, mut b) = (0.0, 1.0);
-    let mut best = at(0.0);
-    if cl(best.0, best.1) >= level {
-        // the node itself, snapped, is on the material side: step back
-        best = (
-            snap(lo.0 - (hi.0 - lo.0) * 1e-3),
-            snap(lo.1 - (hi.1 - lo.1) * 1e-3),
-        );
-    }
     let len = (hi.0 - lo.0).hypot(hi.1 - lo.1);
-    // the grid's linear guess first, then a narrow bracket around it
-    let mut probes = [guess, guess - 0.02, guess + 0.02].into_iter();
-    while (b - a) * len > GRID {
-        let m = match probes.next() {
-            Some(g) if g > a && g < b => g,
-            Some(_) => continue,
-            None => (a + b) / 2.0,
+    // the bracket [a, b] in t, with the heights over the aim there
+    let aim = level - 0.5 * LEVEL_TOL;
+    let (mut a, mut fa) = (0.0, zlo.min(level) - aim);
+    let (mut b, mut fb) = (1.0, zhi.max(level) - aim);
+    let mut best = None;
+    let mut kept = 0i8; // which end the last two steps kept (Illinois)
+    for k in 0..64 {
+        if (b - a) * len <= GRID {
+            break;
+        }
+        let mut m = if fa < 0.0 && fb > 0.0 && k % 8 != 7 {
+            a + (b - a) * (-fa / (fb - fa))
+        } else {
+            0.5 * (a + b)
         };
+        // a step that would hug an end gains next to nothing
+        let margin = 0.5 * GRID / len;
+        m = m.clamp(a + margin, b - margin);
         let q = at(m);
         let z = cl(q.0, q.1);
         if z >= level {
-            b = m;
+            (b, fb) = (m, z - aim);
+            if kept == 1 {
+                fa *= 0.5;
+            }
+            kept = 1;
         } else {
-            a = m;
-            best = q;
+            (a, fa) = (m, z - aim);
+            best = Some(q);
             if level - z <= LEVEL_TOL {
                 break;
             }
+            if kept == -1 {
+                fb *= 0.5;
+            }
+            kept = -1;
         }
     }
+    let best = best.unwrap_or_else(|| {
+        // no probe fell below the level: the low node itself, or, where
+        // snapping puts it on the material side, a step back from it
+        let q = at(0.0);
+        if cl(q.0, q.1) < level {
+            q
+        } else {
+            (
+                snap(lo.0 - (hi.0 - lo.0) * 1e-3),
+                snap(lo.1 - (hi.1 - lo.1) * 1e-3),
+            )
+        }
+    });
     DVec3::new(best.0, best.1, level)
+}
+
+/// The drop-cutter's work space carried from one crossing to the next
+/// along a contour: the last contact is usually next to the new one.
+#[derive(Default)]
+pub struct Near {
+    hint: Option<(usize, usize)>,
+    stack: super::dropcutter::Stack,
 }
 
 /// Where the straight move between neighbouring contour points cuts the
@@ -403,7 +444,6 @@ fn crossing(
 /// is shorter than a micrometre. Keeps `clear`'s lifts, and so a
 /// waterline's departures from its level, in the micrometres.
 pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour {
-    use super::path::probe_gouge;
     let level = c.pts[0].z;
     let cl = |x: f64, y: f64| hf.drop(tool, x, y).unwrap_or(floor).max(floor);
     let mut pts = vec![c.pts[0]];
@@ -414,26 +454,30 @@ pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour
             let d = (b - a).truncate();
             let len = d.length();
             // the drop-cutter's probes alone decide a split (the exact
-            // sweep over the samples is `clear`'s, once thinned)
-            if depth < 12 && len > 1e-3 && probe_gouge(hf, tool, a, b, REFINE_DIP) > REFINE_DIP {
-                // the highest CL point along the chord, and a point on its
-                // free side to search from
-                let n = (len / (hf.pitch / 4.0)).ceil().max(2.0) as usize;
-                let (mut top, mut at) = (f64::MIN, a);
-                for i in 1..n {
-                    let q = a + (b - a) * (i as f64 / n as f64);
-                    let z = cl(q.x, q.y);
-                    if z > top {
-                        (top, at) = (z, q);
-                    }
-                }
+            // sweep over the samples is `clear`'s, once thinned): the
+            // highest CL point along the chord, if it rises past the dip
+            let peak = if depth < 12 && len > 1e-3 {
+                peak(hf, tool, floor, a, b)
+            } else {
+                None
+            };
+            if let Some((top, at)) = peak {
                 let right = glam::DVec2::new(d.y, -d.x) / len;
                 let out = [1.0, 0.5, 0.25, 0.125]
                     .map(|f| at.truncate() + right * len * f)
                     .into_iter()
-                    .find(|o| cl(o.x, o.y) < level);
-                if let (true, Some(out)) = (top > level, out) {
-                    let q = crossing(hf, tool, floor, level, (out.x, out.y), (at.x, at.y), 0.5);
+                    .map(|o| (o, cl(o.x, o.y)))
+                    .find(|o| o.1 < level);
+                if let Some((out, zo)) = out {
+                    let q = crossing(
+                        hf,
+                        tool,
+                        floor,
+                        level,
+                        ((out.x, out.y), zo),
+                        ((at.x, at.y), top),
+                        &mut Near::default(),
+                    );
                     todo.push((q, b, depth + 1));
                     todo.push((a, q, depth + 1));
                     continue;
@@ -449,6 +493,49 @@ pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour
         closed: c.closed,
         pending: Vec::new(),
     }
+}
+
+/// The highest point of the CL surface along the move a -> b between two
+/// neighbouring contour points, if it rises more than REFINE_DIP above
+/// the move. A ball's or tapered tip's CL surface is smooth and the move
+/// short (a node pitch): its rise peaks near the middle, and three probes
+/// find it (`clear` checks the thinned moves exactly). A flat or V tool's
+/// CL surface has creases: every probe `probe_gouge` makes, then the
+/// highest of a dense scan.
+fn peak(hf: &HeightField, tool: &Tool, floor: f64, a: DVec3, b: DVec3) -> Option<(f64, DVec3)> {
+    use super::path::probe_gouge;
+    if matches!(tool, Tool::Ball { .. } | Tool::TaperBall { .. }) {
+        let mut stack = Vec::new();
+        let mut hint = None;
+        let mut top: Option<(f64, DVec3)> = None;
+        for f in [0.5, 0.25, 0.75] {
+            let q = a + (b - a) * f;
+            if let Some((z, c)) = hf.drop_above(tool, q.x, q.y, q.z + REFINE_DIP, hint, &mut stack)
+            {
+                hint = Some(c);
+                if top.is_none_or(|t| z > t.0) {
+                    top = Some((z, q));
+                }
+            }
+        }
+        return top;
+    }
+    if probe_gouge(hf, tool, a, b, REFINE_DIP) <= REFINE_DIP {
+        return None;
+    }
+    let cl = |x: f64, y: f64| hf.drop(tool, x, y).unwrap_or(floor).max(floor);
+    let n = ((b - a).truncate().length() / (hf.pitch / 4.0))
+        .ceil()
+        .max(2.0) as usize;
+    let (mut top, mut at) = (f64::MIN, a);
+    for i in 1..n {
+        let q = a + (b - a) * (i as f64 / n as f64);
+        let z = cl(q.x, q.y);
+        if z > top {
+            (top, at) = (z, q);
+        }
+    }
+    (top > a.z.max(b.z)).then_some((top, at))
 }
 
 /// How deep a move between contour points may cut before it is split.
