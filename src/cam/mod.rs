@@ -1404,38 +1404,55 @@ impl ToolpathJob {
         keep_also: Option<&(dyn Fn(f64, f64) -> bool + Sync)>,
     ) -> Vec<Vec<DVec3>> {
         let g = waterline::ClGrid::new(hf, tool, relief.width_mm, relief.height_mm, floor);
-        let mut out: Vec<Vec<DVec3>> = Vec::new();
         let steep_only = self.finish == Finish::RasterWaterline;
-        for level in waterline::levels(&g, dz) {
-            let (w, h) = (relief.width_mm, relief.height_mm);
-            // beside a raster, steep ground takes every m-th level only
-            let k = ((level - floor) / dz).round() as i64;
-            let keep = |p: DVec3, slope: f64| {
-                (0.0..=w).contains(&p.x)
-                    && (0.0..=h).contains(&p.y)
-                    && (!steep_only || waterline::every_nth(slope).is_some_and(|m| k % m == 0))
-                    && keep_also.is_none_or(|f| f(p.x, p.y))
-            };
-            let cs: Vec<waterline::Contour> = waterline::contours(&g, level)
-                .iter()
-                .flat_map(|c| waterline::parts(c, keep))
-                .collect();
-            let mut loops: Vec<(bool, Vec<DVec3>)> = cs
-                .par_iter()
-                .flat_map_iter(|c| {
-                    let c = waterline::place(hf, tool, floor, c);
-                    let c = waterline::refine(hf, tool, floor, &c);
-                    let mut pts = waterline::simplify(&c, self.tolerance);
-                    if climb {
-                        pts.reverse();
-                    }
-                    // within the panel, where the job's travel is checked
-                    let pts = waterline::clear(hf, tool, &pts);
-                    let pieces = tile::clip(&pts, [0.0, 0.0, w, h]);
-                    let whole = pieces.len() == 1 && pieces[0].len() == pts.len();
-                    pieces.into_iter().map(move |p| (c.closed && whole, p))
-                })
-                .collect();
+        let (w, h) = (relief.width_mm, relief.height_mm);
+        // every level's contours, then all of them placed, refined and
+        // checked at once: one level may hold a single long contour
+        let levels = waterline::levels(&g, dz);
+        let contours: Vec<(usize, waterline::Contour)> = levels
+            .par_iter()
+            .enumerate()
+            .map(|(n, &level)| {
+                // beside a raster, steep ground takes every m-th level only
+                let k = ((level - floor) / dz).round() as i64;
+                let keep = |p: DVec3, slope: f64| {
+                    (0.0..=w).contains(&p.x)
+                        && (0.0..=h).contains(&p.y)
+                        && (!steep_only
+                            || waterline::every_nth(slope).is_some_and(|m| k % m == 0))
+                        && keep_also.is_none_or(|f| f(p.x, p.y))
+                };
+                waterline::contours(&g, level)
+                    .iter()
+                    .flat_map(|c| waterline::parts(c, keep))
+                    .map(|c| (n, c))
+                    .collect::<Vec<_>>()
+            })
+            .flatten_iter()
+            .collect();
+        let done: Vec<(usize, Vec<(bool, Vec<DVec3>)>)> = contours
+            .par_iter()
+            .map(|(n, c)| {
+                let c = waterline::place(hf, tool, floor, c);
+                let c = waterline::refine(hf, tool, floor, &c);
+                let mut pts = waterline::simplify(&c, self.tolerance);
+                if climb {
+                    pts.reverse();
+                }
+                // within the panel, where the job's travel is checked
+                let pts = waterline::clear(hf, tool, &pts);
+                let pieces = tile::clip(&pts, [0.0, 0.0, w, h]);
+                let whole = pieces.len() == 1 && pieces[0].len() == pts.len();
+                let closed = c.closed && whole;
+                (*n, pieces.into_iter().map(|p| (closed, p)).collect())
+            })
+            .collect();
+        let mut by_level: Vec<Vec<(bool, Vec<DVec3>)>> = vec![Vec::new(); levels.len()];
+        for (n, pieces) in done {
+            by_level[n].extend(pieces);
+        }
+        let mut out: Vec<Vec<DVec3>> = Vec::new();
+        for mut loops in by_level {
             // nearest next: closed loops start where they are nearest
             let mut at = out
                 .last()
