@@ -344,6 +344,19 @@ impl HeightField {
         stack: &mut Stack,
     ) -> Option<(f64, (usize, usize))> {
         let r = tool.radius();
+        let r2 = r * r;
+        // the profile's lower bound, for a ball without its division
+        let inv_d = match *tool {
+            Tool::Ball { d } => 1.0 / d,
+            _ => f64::NAN,
+        };
+        let below = |d2: f64| {
+            if inv_d.is_nan() {
+                tool.profile_below(d2)
+            } else {
+                d2 * inv_d
+            }
+        };
         let mut best = floor;
         let mut contact = (usize::MAX, 0);
         let (cw, ch) = self.lattice.cells();
@@ -382,24 +395,39 @@ impl HeightField {
                 self.cells(tool, r, first, 1 << level, (x, y), &mut best, &mut contact);
                 continue;
             }
-            // children, most promising last so they are searched first
+            // children, most promising last so they are searched first;
+            // their distances from the axis along x and y, two each
             let child = &self.levels[level - 1];
+            let s = (1usize << (level - 1)) as f64 * self.pitch;
+            let xl = (2 * bx) as f64 * s - 0.5 * self.pitch;
+            let yt = self.top + 0.5 * self.pitch - (2 * by) as f64 * s;
+            let dxs = [
+                (xl - x).max(0.0).max(x - (xl + s)),
+                (xl + s - x).max(0.0).max(x - (xl + 2.0 * s)),
+            ];
+            let dys = [
+                (yt - s - y).max(0.0).max(y - yt),
+                (yt - 2.0 * s - y).max(0.0).max(y - (yt - s)),
+            ];
             let mut kids = [(0.0f64, 0usize, 0usize, 0usize); 4];
             let mut nk = 0;
-            for (cx, cy) in [
+            for (k, (cx, cy)) in [
                 (2 * bx, 2 * by),
                 (2 * bx + 1, 2 * by),
                 (2 * bx, 2 * by + 1),
                 (2 * bx + 1, 2 * by + 1),
-            ] {
+            ]
+            .into_iter()
+            .enumerate()
+            {
                 if cx >= child.w || cy >= child.h {
                     continue;
                 }
-                let d2 = self.block_distance(level - 1, cx, cy, x, y);
-                if d2 > r * r {
+                let d2 = dxs[k & 1] * dxs[k & 1] + dys[k >> 1] * dys[k >> 1];
+                if d2 > r2 {
                     continue;
                 }
-                let b = child.get(cx, cy) - tool.profile_below(d2);
+                let b = child.data[cy * child.w + cx] - below(d2);
                 if b > best {
                     kids[nk] = (b, level - 1, cx, cy);
                     nk += 1;
