@@ -328,3 +328,40 @@ fn waterlines_stay_within_the_travel() {
     assert!(rep["max_gouge_mm"].as_f64().unwrap() <= 0.001, "{rep}");
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// A tool spanning more than 32 samples drops its rows two samples apart
+/// (`raster::point_spacing`): the splits over curved ground and the exact
+/// check must leave the simulator nothing to find. A 6.35 mm ball over the
+/// demo at 200 px, 18 mm wide (0.09 mm pitch, 35 samples per radius).
+#[test]
+fn a_big_tool_on_a_fine_relief_is_clean() {
+    let d = scratch("coarse-rows");
+    let job = d.join("job.nc");
+    ok(&run(&[
+        "carve",
+        "--resolution",
+        "200",
+        "--width",
+        "18",
+        "--depth",
+        "1.5",
+        "--tool",
+        "ball:6.35",
+        "--machine",
+        "shapeoko",
+        "--allow-deep-cuts",
+        "-o",
+        job.to_str().unwrap(),
+        "-q",
+    ]));
+    let report = simulate_report(
+        &job,
+        &d.join("job-relief.png"),
+        &d.join("cut.png"),
+        &["--machine", "shapeoko"],
+    );
+    let gouge = report["max_gouge_mm"].as_f64().unwrap();
+    eprintln!("ball 6.35 on an 18 mm demo at 200 px: gouge {gouge:.5} mm");
+    assert!(gouge <= 0.001, "gouge {gouge}");
+    std::fs::remove_dir_all(d).unwrap();
+}

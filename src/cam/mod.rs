@@ -1246,7 +1246,7 @@ impl ToolpathJob {
         step: f64,
         keep: Option<&(dyn Fn(f64, f64) -> bool + Sync)>,
     ) -> (Vec<Vec<DVec3>>, usize) {
-        let rows = raster::rows_in(region, self.angle, step, hf.pitch);
+        let rows = raster::rows_in(region, self.angle, step, raster::point_spacing(hf, tool));
         let tol = self.tolerance;
         let climb = self.direction == Some(Direction::Climb);
         // runs of whole rows; pieces of cut rows alone
@@ -1418,8 +1418,7 @@ impl ToolpathJob {
                 let keep = |p: DVec3, slope: f64| {
                     (0.0..=w).contains(&p.x)
                         && (0.0..=h).contains(&p.y)
-                        && (!steep_only
-                            || waterline::every_nth(slope).is_some_and(|m| k % m == 0))
+                        && (!steep_only || waterline::every_nth(slope).is_some_and(|m| k % m == 0))
                         && keep_also.is_none_or(|f| f(p.x, p.y))
                 };
                 waterline::contours(&g, level)
