@@ -37,3 +37,5 @@ fi
 
 echo "== toolpath: 2048 px, 100 mm relief, 3.175 ball, 10% stepover raster (CL + path + G-code)"
 wall $R -v toolpath "$T/sq.png" -o "$T/finish-cam.nc" --machine shapeoko
+echo "== the same, raster+waterline"
+wall $R -v toolpath "$T/sq.png" -o "$T/finish-rw.nc" --machine shapeoko --finish raster+waterline

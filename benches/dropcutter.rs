@@ -63,8 +63,9 @@ fn main() {
             .collect();
         let points: usize = cl.iter().map(Vec::len).sum();
         println!(
-            "{spec}: {points} CL points ({rows} rows, stepover {stepover:.3} mm) in {:.0} ms (pyramid {:.0} ms, {} threads)",
+            "{spec}: {points} CL points ({rows} rows, stepover {stepover:.3} mm) in {:.0} ms, {:.0}k points/s (pyramid {:.0} ms, {} threads)",
             t.elapsed().as_secs_f64() * 1e3,
+            points as f64 / t.elapsed().as_secs_f64() / 1e3,
             pyramid.as_secs_f64() * 1e3,
             rayon::current_num_threads()
         );
