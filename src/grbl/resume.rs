@@ -207,7 +207,10 @@ impl Tracker {
 
 /// Lines that put the machine back where the job was before `lines[from]`:
 /// units, distance mode, spindle, up to the job's safe height, over the
-/// point, down at the plunge feed, then the job's feed.
+/// point, down at the plunge feed, then the job's feed. A G92 offset the
+/// job had set (GRBL forgets it at a reset) is cleared, the point reached
+/// in the coordinates without it, and set again there with G92: the
+/// machine then reads the job's own coordinates at the very same place.
 pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
     let parsed = |l: &JobLine| parse_line(&l.text, l.number);
     let top = lines
@@ -233,14 +236,22 @@ pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
     if m.tlo_on {
         out.push(format!("G43.1Z{}", n(m.tlo)));
     }
+    // without the job's G92 offset until the point is reached
+    let g = m.g92;
+    if g != DVec3::ZERO {
+        out.push("G92.1".into());
+    }
     if let Some(dir) = m.spindle {
         out.push(format!("M{dir}S{}", n(m.speed)));
         out.push("G4P2".into());
     }
-    out.push(format!("G0Z{}", n(safe)));
-    out.push(format!("G0X{}Y{}", n(pos.x), n(pos.y)));
+    out.push(format!("G0Z{}", n(safe + g.z)));
+    out.push(format!("G0X{}Y{}", n(pos.x + g.x), n(pos.y + g.y)));
     let f = m.feed.unwrap_or(300.0);
-    out.push(format!("G1Z{}F{}", n(pos.z), n(f.min(300.0))));
+    out.push(format!("G1Z{}F{}", n(pos.z + g.z), n(f.min(300.0))));
+    if g != DVec3::ZERO {
+        out.push(format!("G92X{}Y{}Z{}", n(pos.x), n(pos.y), n(pos.z)));
+    }
     out.push(format!("F{}", n(f)));
     if m.inches {
         out.push("G20".into());
@@ -313,4 +324,50 @@ pub fn standing(lines: &[JobLine], journal: &Path) -> String {
         ),
     };
     format!("; the journal says {ran}{doubt}{advice}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gcode::modal::Modal;
+
+    /// The machine state after `lines`, and after a reset then the
+    /// re-entry preamble for the line after them: the same machine
+    /// position, work offset (G55, TLO and G92 included) and modes.
+    #[test]
+    fn reentry_restores_offsets_and_the_point() {
+        let dir = std::env::temp_dir().join(format!("relievo-reentry-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let job = dir.join("job.nc");
+        let text = "G21G90\nG10L2P2X5Y6Z-7\nG55\nG43.1Z1.5\nG0Z3\nG0X10Y10\n\
+                    G92X0Y0Z2\nM3S1000\nG1Z-1F400\nG1X4Y3\nG1X8Y1\nM5\nM30\n";
+        std::fs::write(&job, text).unwrap();
+        let lines = crate::grbl::sender::load_job(&job).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        let from = lines.iter().position(|l| l.text == "G1X8Y1").unwrap();
+        let fold = |m: &mut Modal, ls: &[String]| {
+            for (k, l) in ls.iter().enumerate() {
+                m.apply(&parse_line(l, k + 1)).unwrap();
+            }
+        };
+        let mut before = Modal::new(DVec3::new(-50.0, -40.0, -1.0));
+        let texts: Vec<String> = lines[..from].iter().map(|l| l.text.clone()).collect();
+        fold(&mut before, &texts);
+        assert_ne!(before.g92, DVec3::ZERO);
+        // a reset: G54, no TLO, no G92, the stored offsets kept; the
+        // machine wherever the stop left it
+        let mut after = before.after_reset(DVec3::new(-20.0, -3.0, -0.5));
+        let pre = reentry(&lines, from);
+        fold(&mut after, &pre);
+        assert!((after.pos - before.pos).length() < 1e-9, "{pre:?}");
+        assert!((after.wco() - before.wco()).length() < 1e-9, "{pre:?}");
+        assert!((after.g92 - before.g92).length() < 1e-9, "{pre:?}");
+        assert_eq!((after.coord, after.tlo_on), (before.coord, before.tlo_on));
+        assert_eq!(after.spindle, before.spindle);
+        // the tool stays clear of the work until over the point: it
+        // rises to the job's safe height (in its own coordinates) first
+        let work_z = |l: &str| l.strip_prefix("G0Z").map(|z| z.parse::<f64>().unwrap());
+        let rise = pre.iter().find_map(|l| work_z(l)).unwrap();
+        assert!(rise - before.g92.z >= 3.0, "{pre:?}");
+    }
 }
