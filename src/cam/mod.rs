@@ -1429,7 +1429,9 @@ impl ToolpathJob {
             })
             .flatten_iter()
             .collect();
-        let done: Vec<(usize, Vec<(bool, Vec<DVec3>)>)> = contours
+        // (closed?, points) of each piece, by level
+        type Pieces = Vec<(bool, Vec<DVec3>)>;
+        let done: Vec<(usize, Pieces)> = contours
             .par_iter()
             .map(|(n, c)| {
                 let c = waterline::place(hf, tool, floor, c);
@@ -1446,7 +1448,7 @@ impl ToolpathJob {
                 (*n, pieces.into_iter().map(|p| (closed, p)).collect())
             })
             .collect();
-        let mut by_level: Vec<Vec<(bool, Vec<DVec3>)>> = vec![Vec::new(); levels.len()];
+        let mut by_level: Vec<Pieces> = vec![Vec::new(); levels.len()];
         for (n, pieces) in done {
             by_level[n].extend(pieces);
         }
