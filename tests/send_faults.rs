@@ -397,3 +397,91 @@ fn machine_status_over_a_pseudo_terminal() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("<Idle|MPos:0.000,0.000,0.000"), "{text}");
 }
+
+/// Issue 10: the keys of a job streamed from a terminal. Five '-' lower
+/// the feed override to 50% (GRBL keeps it after the job: `machine
+/// status` reads Ov:50), space holds the machine (its log stops growing)
+/// and space again lets it finish. `send`'s stdin is a pseudo-terminal
+/// the test types into.
+#[test]
+fn terminal_keys_hold_resume_and_override_the_feed() {
+    use std::io::Write;
+    use std::os::fd::{FromRawFd, OwnedFd};
+    let d = scratch("faults-keys");
+    let (job, lines) = cutting_job(&d, 300);
+    let log = d.join("executed.log");
+    let (sim, dev) = grbl_sim(&["--speed", "2", "--log", log.to_str().unwrap()]);
+    let (mut master, mut slave) = (0, 0);
+    // SAFETY: openpty fills two descriptors, which are owned from here on
+    let opened = unsafe {
+        libc::openpty(
+            &mut master,
+            &mut slave,
+            std::ptr::null_mut(),
+            std::ptr::null(),
+            std::ptr::null(),
+        )
+    };
+    assert_eq!(opened, 0, "openpty");
+    let mut keys = unsafe { std::fs::File::from_raw_fd(master) };
+    let slave = unsafe { OwnedFd::from_raw_fd(slave) };
+    let said = d.join("send.txt");
+    let mut send = bin()
+        .args(["send", job.to_str().unwrap(), "--port", &dev])
+        .stdin(Stdio::from(slave))
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&said).unwrap())
+        .spawn()
+        .unwrap();
+    let ran = || {
+        std::fs::read_to_string(&log)
+            .unwrap_or_default()
+            .lines()
+            .count()
+    };
+    let t0 = Instant::now();
+    while ran() < 20 && t0.elapsed() < Duration::from_secs(20) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    keys.write_all(b"-----").unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    keys.write_all(b" ").unwrap();
+    // the hold decelerates, then nothing more runs
+    std::thread::sleep(Duration::from_millis(700));
+    let (held_at, t_hold) = (ran(), Instant::now());
+    std::thread::sleep(Duration::from_millis(1000));
+    let after_hold = ran();
+    let held_for_check = t_hold.elapsed();
+    keys.write_all(b" ").unwrap();
+    let t1 = Instant::now();
+    let status = loop {
+        if let Some(s) = send.try_wait().unwrap() {
+            break s;
+        }
+        assert!(t1.elapsed() < Duration::from_secs(60), "send never ended");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let text = std::fs::read_to_string(&said).unwrap();
+    assert!(status.success(), "{text}");
+    let held_for = held_for_check.as_secs_f64();
+    let st = run(&["machine", "status", "--port", &dev]);
+    ok(&st);
+    let report = String::from_utf8_lossy(&st.stdout).to_string();
+    // the machine runs its planner after `send` returns
+    let log_lines = executed(&log, &lines);
+    drop(sim);
+    eprintln!(
+        "keys: held at log line {held_at} for {held_for:.1} s ({} more ran), then {} lines in all; {}",
+        after_hold - held_at,
+        log_lines.len(),
+        report.trim()
+    );
+    assert!(
+        held_at > 20 && held_at < log_lines.len(),
+        "held at {held_at}"
+    );
+    assert_eq!(after_hold, held_at, "the machine ran on in the hold");
+    assert!(report.contains("|Ov:50,100,100"), "{report}");
+    runs(&log_lines, &lines);
+    std::fs::remove_dir_all(d).unwrap();
+}
