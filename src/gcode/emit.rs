@@ -336,7 +336,8 @@ impl Emitter {
 
     /// Retract, stop the spindle and pause (M0) for the operator to fit
     /// the next tool; `header` (with its `tool: SPEC` line) says which and
-    /// `zero` where to set Z0 again.
+    /// `zero` where to set Z0 again. After the pause, safe Z again before
+    /// the spindle starts and anything moves sideways.
     pub fn tool_change(&mut self, header: &[String], s: &Settings, zero: &str) {
         self.retract(s);
         self.line("M5".into());
@@ -348,6 +349,12 @@ impl Emitter {
             &format!("change the tool, {zero}, then resume"),
         );
         self.line("M0".into());
+        // the operator leaves the new tool wherever Z0 was set, often on
+        // the stock or the pad: up to safe Z before any other move
+        if let Some(p) = self.pos {
+            self.pos = Some(DVec3::new(p.x, p.y, f64::NAN));
+            self.go(DVec3::new(p.x, p.y, s.safe_z), true, 0.0);
+        }
         self.spindle(s);
     }
 
@@ -439,15 +446,20 @@ pub fn arc_run(pts: &[DVec3], i: usize, tol: f64) -> Option<(usize, Arc)> {
 mod tests {
     use super::*;
 
-    #[test]
-    fn modal_compact_and_short_lines() {
-        let s = Settings {
+    /// Feeds, speed, safe Z and dwell of a typical finish.
+    fn settings() -> Settings {
+        Settings {
             feed: 1200.0,
             plunge_feed: 300.0,
             rpm: 18000.0,
             safe_z: 5.0,
             dwell: 2.0,
-        };
+        }
+    }
+
+    #[test]
+    fn modal_compact_and_short_lines() {
+        let s = settings();
         let mut e = Emitter::new(
             &["tool: ball:3.175".into(), "x".repeat(200)],
             &s,
@@ -468,6 +480,29 @@ mod tests {
         assert!(g.contains("G1 Z-0.5 F300\nX1.5 Z-0.25 F1200\nX2\n"), "{g}");
         assert_eq!(num(-0.00001), "0");
         assert_eq!(num(2.50), "2.5");
+        crate::gcode::program(&g).unwrap();
+    }
+
+    /// After the M0 of a tool change the tool rises to safe Z before the
+    /// spindle starts and before any sideways move: the operator may
+    /// leave it touching the stock where Z0 was set.
+    #[test]
+    fn a_tool_change_rises_before_it_moves() {
+        let s = settings();
+        let mut e = Emitter::new(&["tool: flat:3.175".into()], &s, false, 0.0);
+        let cut = [DVec3::new(1.0, 2.0, -0.5), DVec3::new(3.0, 2.0, -0.5)];
+        e.pass(&cut, &s, s.safe_z);
+        e.tool_change(&["tool: ball:1".into()], &s, "set Z0 on the stock");
+        e.pass(&[DVec3::new(8.0, 9.0, -0.2)], &s, s.safe_z);
+        let g = e.finish(&s);
+        let after: Vec<&str> = g
+            .lines()
+            .skip_while(|l| *l != "M0")
+            .skip(1)
+            .filter(|l| !l.starts_with('('))
+            .collect();
+        assert_eq!(after[..3], ["Z5", "M3 S18000", "G4 P2"], "{g}");
+        assert!(after[3].starts_with("X8 Y9"), "{g}");
         crate::gcode::program(&g).unwrap();
     }
 }
