@@ -29,7 +29,7 @@ impl Planned {
         }
     }
 
-    /// Fold `f(acc, height, distance)` over the stock cells within `r`
+    /// Fold `f(acc, height, distance^2)` over the stock cells within `r`
     /// of (x, y), starting from `init`.
     fn fold_footprint(
         &self,
@@ -51,9 +51,9 @@ impl Planned {
             let (_, cy) = s.centre(0, j);
             for i in i0..=i1 {
                 let (cx, _) = s.centre(i, 0);
-                let d = ((cx - x).powi(2) + (cy - y).powi(2)).sqrt();
-                if d <= r {
-                    acc = f(acc, *self.top.get(i, j) as f64, d);
+                let d2 = (cx - x).powi(2) + (cy - y).powi(2);
+                if d2 <= r * r {
+                    acc = f(acc, *self.top.get(i, j) as f64, d2);
                 }
             }
         }
@@ -68,8 +68,13 @@ impl Planned {
     /// The thickest material the tool at tip (x, y, z) would cut: over the
     /// cells under it, how far the stock stands above its surface.
     pub fn would_cut(&self, x: f64, y: f64, z: f64, tool: &Tool) -> f64 {
-        self.fold_footprint((x, y, tool.radius()), 0.0, |m, top, d| {
-            m.max(top - (z + tool.profile(d)))
+        // most cells lie below the tip: those need no profile
+        self.fold_footprint((x, y, tool.radius()), 0.0, |m, top, d2| {
+            if top - z <= m {
+                m
+            } else {
+                m.max(top - (z + tool.profile_sq(d2)))
+            }
         })
     }
 
