@@ -451,7 +451,7 @@ fn terminal_keys_hold_resume_and_override_the_feed() {
     let (held_at, t_hold) = (ran(), Instant::now());
     std::thread::sleep(Duration::from_millis(1000));
     let after_hold = ran();
-    let held_for_check = t_hold.elapsed();
+    let held_for = t_hold.elapsed().as_secs_f64();
     keys.write_all(b" ").unwrap();
     let t1 = Instant::now();
     let status = loop {
@@ -463,7 +463,6 @@ fn terminal_keys_hold_resume_and_override_the_feed() {
     };
     let text = std::fs::read_to_string(&said).unwrap();
     assert!(status.success(), "{text}");
-    let held_for = held_for_check.as_secs_f64();
     let st = run(&["machine", "status", "--port", &dev]);
     ok(&st);
     let report = String::from_utf8_lossy(&st.stdout).to_string();

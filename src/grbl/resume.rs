@@ -336,14 +336,9 @@ mod tests {
     /// position, work offset (G55, TLO and G92 included) and modes.
     #[test]
     fn reentry_restores_offsets_and_the_point() {
-        let dir = std::env::temp_dir().join(format!("relievo-reentry-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let job = dir.join("job.nc");
         let text = "G21G90\nG10L2P2X5Y6Z-7\nG55\nG43.1Z1.5\nG0Z3\nG0X10Y10\n\
                     G92X0Y0Z2\nM3S1000\nG1Z-1F400\nG1X4Y3\nG1X8Y1\nM5\nM30\n";
-        std::fs::write(&job, text).unwrap();
-        let lines = crate::grbl::sender::load_job(&job).unwrap();
-        std::fs::remove_dir_all(&dir).unwrap();
+        let lines = crate::grbl::sender::job_lines(text, "job.nc").unwrap();
         let from = lines.iter().position(|l| l.text == "G1X8Y1").unwrap();
         let fold = |m: &mut Modal, ls: &[String]| {
             for (k, l) in ls.iter().enumerate() {

@@ -107,8 +107,13 @@ impl TouchOff {
 
 /// The lines of a job that carry anything for GRBL.
 pub fn load_job(path: &Path) -> Result<Vec<JobLine>> {
-    let what = path.display().to_string();
     let text = crate::input::read_text(path, crate::input::MAX_FILE)?;
+    job_lines(&text, &path.display().to_string())
+}
+
+/// The lines of job `text` (named `what` in errors) that carry anything
+/// for GRBL.
+pub fn job_lines(text: &str, what: &str) -> Result<Vec<JobLine>> {
     let mut out = Vec::new();
     let mut modal = Modal::new(DVec3::ZERO);
     let mut note = String::new();

@@ -213,13 +213,8 @@ fn merge_with(points: &[DVec3], tol: f64, fast: bool) -> Vec<DVec3> {
     let mut run = Run::new(anchor, points[1], tol);
     while k < points.len() {
         let e = points[k];
-        let l = match run.test(e).filter(|_| fast) {
-            Some(verdict) => verdict,
-            None => {
-                run.straight = false;
-                lift(anchor, e, &points[start + 1..k])
-            }
-        };
+        let fast_verdict = if fast { run.test(e) } else { None };
+        let l = fast_verdict.unwrap_or_else(|| lift(anchor, e, &points[start + 1..k]));
         match l {
             Some(l) => {
                 pending = DVec3::new(e.x, e.y, e.z + l);
@@ -334,9 +329,13 @@ impl Run {
     /// The lift a move from `a` to `e` needs over the points so far (as
     /// `merge`'s exact test gives it): Some(Some(lift)) when it is within
     /// the tolerance, Some(None) when not, None when this test cannot
-    /// tell (off the line, or a point's foot before `a`).
+    /// tell (off the line, or a point's foot before `a`); from then on it
+    /// leaves the run to the exact test.
     fn test(&mut self, e: DVec3) -> Option<Option<f64>> {
-        let u = self.along(e)?;
+        let Some(u) = self.along(e) else {
+            self.straight = false;
+            return None;
+        };
         let h = e.z - self.a.z;
         let s = self.steepest.max(h / u);
         let need = s * u - h;
@@ -346,6 +345,7 @@ impl Run {
         // every point's foot on the lifted move lies past a (past e it
         // cannot: they are all below the move and nearer than e)
         if s > 0.0 && self.least_u + s * self.least_h < 0.0 {
+            self.straight = false;
             return None;
         }
         while self.best + 1 < self.hull.len() {

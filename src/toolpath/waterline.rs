@@ -381,18 +381,18 @@ fn crossing(
     let (mut b, mut fb) = (1.0, zhi.max(level) - aim);
     let mut best = None;
     let mut kept = 0i8; // which end the last two steps kept (Illinois)
+                        // a step that would hug an end gains next to nothing
+    let margin = 0.5 * GRID / len;
     for k in 0..64 {
         if (b - a) * len <= GRID {
             break;
         }
-        let mut m = if fa < 0.0 && fb > 0.0 && k % 8 != 7 {
+        let m = if fa < 0.0 && fb > 0.0 && k % 8 != 7 {
             a + (b - a) * (-fa / (fb - fa))
         } else {
             0.5 * (a + b)
-        };
-        // a step that would hug an end gains next to nothing
-        let margin = 0.5 * GRID / len;
-        m = m.clamp(a + margin, b - margin);
+        }
+        .clamp(a + margin, b - margin);
         let q = at(m);
         let z = cl(q.0, q.1);
         if z >= level {
@@ -457,7 +457,7 @@ pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour
             // sweep over the samples is `clear`'s, once thinned): the
             // highest CL point along the chord, if it rises past the dip
             let peak = if depth < 12 && len > 1e-3 {
-                peak(hf, tool, floor, a, b)
+                peak(hf, tool, &cl, a, b)
             } else {
                 None
             };
@@ -502,7 +502,13 @@ pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour
 /// find it (`clear` checks the thinned moves exactly). A flat or V tool's
 /// CL surface has creases: every probe `probe_gouge` makes, then the
 /// highest of a dense scan.
-fn peak(hf: &HeightField, tool: &Tool, floor: f64, a: DVec3, b: DVec3) -> Option<(f64, DVec3)> {
+fn peak(
+    hf: &HeightField,
+    tool: &Tool,
+    cl: &dyn Fn(f64, f64) -> f64,
+    a: DVec3,
+    b: DVec3,
+) -> Option<(f64, DVec3)> {
     use super::path::probe_gouge;
     if matches!(tool, Tool::Ball { .. } | Tool::TaperBall { .. }) {
         let mut stack = Vec::new();
@@ -523,7 +529,6 @@ fn peak(hf: &HeightField, tool: &Tool, floor: f64, a: DVec3, b: DVec3) -> Option
     if probe_gouge(hf, tool, a, b, REFINE_DIP) <= REFINE_DIP {
         return None;
     }
-    let cl = |x: f64, y: f64| hf.drop(tool, x, y).unwrap_or(floor).max(floor);
     let n = ((b - a).truncate().length() / (hf.pitch / 4.0))
         .ceil()
         .max(2.0) as usize;
