@@ -105,6 +105,44 @@ fn a_full_depth_pass_is_refused_unless_allowed() {
         "{}",
         &text[..1500]
     );
+    // the lines named are the written file's, comments put in after the
+    // judging counted: `simulate` on the same cells (one per pixel at
+    // 120 px) names the very same lines and figures
+    let sim = run(&[
+        "simulate",
+        job.to_str().unwrap(),
+        "--relief",
+        d.join("job-relief.png").to_str().unwrap(),
+        "--oversample",
+        "1",
+        "-o",
+        d.join("cut.png").to_str().unwrap(),
+    ]);
+    ok(&sim);
+    let engaged = |s: &str| -> Vec<String> {
+        s.lines()
+            .filter(|l| l.contains("depth of cut up to") || l.starts_with("plunges into"))
+            .map(String::from)
+            .collect()
+    };
+    let simulated = format!(
+        "{}{}",
+        String::from_utf8_lossy(&sim.stdout),
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    assert_eq!(engaged(&said), engaged(&simulated), "{said}\n{simulated}");
+    assert!(engaged(&said).len() >= 2);
+    let n: usize = said
+        .split("--allow-deep-cuts: line ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    let named = text.lines().nth(n - 1).unwrap();
+    assert!(
+        named.starts_with('X') || named.starts_with("G1"),
+        "line {n}: {named}"
+    );
     std::fs::remove_dir_all(d).unwrap();
 }
 

@@ -802,17 +802,6 @@ impl ToolpathJob {
             );
             bail!("{what}: rough first (--rough), lower --step-down, or pass --allow-deep-cuts");
         }
-        if self.allow_deep_cuts {
-            if let Some((_, o)) = judge::first_over(&judged, &progs, &|tl| limits.material_of(tl)) {
-                notes.push(format!(
-                    "--allow-deep-cuts: line {} cuts {:.3} mm deep with {} (limit {:.3} mm)",
-                    o.line,
-                    o.depth,
-                    o.tool.spec(),
-                    o.limit
-                ));
-            }
-        }
         if self.finish == Finish::Waterline {
             notes.push(format!(
                 "waterline alone leaves up to {:.3} mm (mean {:.3} mm) on gentle slopes, \
@@ -820,22 +809,48 @@ impl ToolpathJob {
                 judged.residual.0, judged.residual.1
             ));
         }
-        let mut out = Outputs::default();
-        let (mut lines, mut time_s) = (0, 0.0);
-        let mut written = Vec::new();
-        let extra: Vec<String> = notes
+        // what goes into each file's header now that it is judged: the
+        // notes not yet there and its time; the lines reported move on by
+        // as many lines as that takes
+        let mut extra: Vec<String> = notes
             .iter()
             .filter(|n| !header_notes.contains(n))
             .cloned()
             .collect();
-        for ((file, text), prog) in texts.into_iter().zip(&progs) {
-            let secs = sim::estimate_time(prog, &m);
+        let times: Vec<f64> = progs.iter().map(|p| sim::estimate_time(p, &m)).collect();
+        let estimate = |secs: f64| format!("estimated time: {} on {}", sim::hms(secs), m.name);
+        let added =
+            |extra: &[String], secs: f64| comment_lines(extra) + comment_lines(&[estimate(secs)]);
+        if self.allow_deep_cuts {
+            if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.material_of(tl)) {
+                let note = |by: usize| {
+                    format!(
+                        "--allow-deep-cuts: line {} cuts {:.3} mm deep with {} (limit {:.3} mm)",
+                        o.line + by,
+                        o.depth,
+                        o.tool.spec(),
+                        o.limit
+                    )
+                };
+                // the note's own lines count: settle the number twice
+                let mut by = added(&extra, times[k]);
+                for _ in 0..2 {
+                    let with: Vec<String> = extra.iter().cloned().chain([note(by)]).collect();
+                    by = added(&with, times[k]);
+                }
+                notes.push(note(by));
+                extra.push(note(by));
+            }
+        }
+        let mut engagement = judged.engagement.clone();
+        engagement.shift_lines(added(&extra, times[0]));
+        let mut out = Outputs::default();
+        let (mut lines, mut time_s) = (0, 0.0);
+        let mut written = Vec::new();
+        for ((file, text), secs) in texts.into_iter().zip(times) {
             time_s += secs;
             let mut text = with_comments(text, &extra);
-            text = with_comments(
-                text,
-                &[format!("estimated time: {} on {}", sim::hms(secs), m.name)],
-            );
+            text = with_comments(text, &[estimate(secs)]);
             // counted as written: a wrapped comment takes several lines
             lines += text.lines().count();
             out.add(&file, text.into_bytes());
@@ -864,7 +879,7 @@ impl ToolpathJob {
             stepover_mm: step,
             written,
             notes,
-            engagement: judged.engagement,
+            engagement,
             residual: judged.residual,
             gouge: judged.gouge,
             rapid_mm,
@@ -1589,6 +1604,15 @@ impl ToolpathJob {
         }
         e.finish(&ops[ops.len() - 1].settings)
     }
+}
+
+/// How many lines `with_comments` adds for `notes`.
+fn comment_lines(notes: &[String]) -> usize {
+    let mut s = String::new();
+    for n in notes {
+        crate::gcode::emit::comment(&mut s, n);
+    }
+    s.lines().count()
 }
 
 /// Insert comment lines after the header comments.

@@ -228,6 +228,19 @@ impl Engagement {
         None
     }
 
+    /// The line numbers moved on by `by` (comments put into the job's
+    /// header after it was judged).
+    pub fn shift_lines(&mut self, by: usize) {
+        for t in &mut self.tools {
+            t.axial_line += by;
+            t.radial_line += by;
+            t.slot_line += by;
+        }
+        for p in &mut self.plunges {
+            *p += by;
+        }
+    }
+
     /// Add another file's engagement: the larger figures per tool.
     pub fn absorb(&mut self, o: Engagement) {
         for t in o.tools {
