@@ -18,6 +18,20 @@ pub const PLUNGE_SKIN: f32 = 0.1;
 /// Figures compared with limits allow this much (mm): the simulator's f32
 /// heights and the G-code grid.
 pub const SLACK: f64 = 0.005;
+/// Cells further across a move than this share of the tool's radius are
+/// shaved by its side: a wall the last rows left a few hundredths of a mm
+/// proud, cut at full height but at a width of under 5% of the tool's
+/// diameter, the light side cut that finishes walls. Their thickness is
+/// not the move's axial depth of cut (it still counts toward its width).
+pub const SIDE_SHAVE: f32 = 0.9;
+
+/// Whether a cell `across` from a move of a tool of radius `r` is shaved
+/// by its side (`SIDE_SHAVE`).
+#[inline(always)]
+pub fn shaved(across: f32, r: f32) -> bool {
+    across.abs() > SIDE_SHAVE * r
+}
+
 /// A move slots when it cuts at least this share of the tool's full width
 /// at its depth of cut.
 pub const SLOT_SHARE: f64 = 0.9;
@@ -43,10 +57,11 @@ impl MoveCut {
         core: 0.0,
     };
 
-    /// Account one cell: `removed` mm taken off at offset `across`.
+    /// Account one cell: `removed` mm taken off at offset `across`;
+    /// `shaved` when the cell lies in the outer SIDE_SHAVE of the width.
     #[inline(always)]
-    pub fn add(&mut self, removed: f32, across: f32, near_axis: bool) {
-        self.axial = if removed > self.axial {
+    pub fn add(&mut self, removed: f32, across: f32, near_axis: bool, shaved: bool) {
+        self.axial = if removed > self.axial && !shaved {
             removed
         } else {
             self.axial

@@ -246,6 +246,8 @@ fn ball_rows_body<const STATS: bool>(
     let inv_len = if len > 0.0 { (1.0 / len) as f32 } else { 0.0 };
     let base = (sw.a.z + sw.r) as f32;
     let r2 = (sw.r * sw.r) as f32;
+    let rf = sw.r as f32;
+    let shave2 = (engage::SIDE_SHAVE * rf).powi(2);
     for (jj, row) in rows.chunks_mut(w).enumerate() {
         let (_, y) = stock.centre(0, ja + jj);
         for t in [1.0, 0.0] {
@@ -276,7 +278,8 @@ fn ball_rows_body<const STATS: bool>(
                 let new = if v > floor { v } else { floor };
                 *cell = new;
                 if STATS {
-                    mc.add(old - new, dx * nxf + oc, t == 1.0 && q <= core2);
+                    // (the disc's rim: its front plows a wall as thinly)
+                    mc.add(old - new, dx * nxf + oc, t == 1.0 && q <= core2, q > shave2);
                 }
             }
         }
@@ -305,7 +308,8 @@ fn ball_rows_body<const STATS: bool>(
                 let new = if v > floor { v } else { floor };
                 *cell = new;
                 if STATS {
-                    mc.add(old - new, wx * nxf + wy * nyf, false);
+                    let across = wx * nxf + wy * nyf;
+                    mc.add(old - new, across, false, engage::shaved(across, rf));
                 }
             }
         }
@@ -444,10 +448,22 @@ fn cut_impl<const STATS: bool>(
                             let new = (z as f32).max(floor);
                             if STATS {
                                 let (ex, ey) = (x - seg.b.x, y - seg.b.y);
+                                // how far from the move's axis line
+                                let off = {
+                                    let (dx, dy) = (seg.b.x - seg.a.x, seg.b.y - seg.a.y);
+                                    let l2 = dx * dx + dy * dy;
+                                    let t = if l2 > 0.0 {
+                                        (((x - sw.a.x) * dx + wy * dy) / l2).clamp(0.0, 1.0)
+                                    } else {
+                                        0.0
+                                    };
+                                    (x - sw.a.x - t * dx).hypot(wy - t * dy)
+                                };
                                 mc.add(
                                     *cell - new,
                                     ((x - sw.a.x) * nx + wy * ny) as f32,
                                     ex * ex + ey * ey <= core2,
+                                    engage::shaved(off as f32, r as f32),
                                 );
                             }
                             *cell = new;
@@ -685,6 +701,37 @@ mod tests {
             let (cx, cy) = s.centre(i, j);
             let (u, v) = (cx / 0.5 - 0.5, (6.0 - cy) / 0.5 - 0.5);
             assert!((u - u.round()).abs() < 1e-9 && (v - v.round()).abs() < 1e-9);
+        }
+    }
+
+    /// A wall left 0.09 mm proud along a pre-cut channel is shaved by the
+    /// tool's rim at full height: not an axial depth of cut. A wall 0.59
+    /// mm proud is (ball and flat: the two cutting paths).
+    #[test]
+    fn a_wall_shaved_by_the_rim_is_not_a_depth_of_cut() {
+        for tool in [Tool::Ball { d: 3.175 }, Tool::Flat { d: 3.175 }] {
+            let axial = |proud: f64| {
+                let (s, mut h) = stock(20.0, 0.02);
+                // channel 2 mm deep along X at Y 10, the wall at |dy| > edge
+                let edge = 1.5875 - proud;
+                for j in 0..h.h {
+                    let (_, y) = s.centre(0, j);
+                    if (y - 10.0).abs() <= edge {
+                        for i in 0..h.w {
+                            h.set(i, j, -2.0);
+                        }
+                    }
+                }
+                let prog = program("G0 X2 Y10 Z1\nG1 Z-2 F100\nG1 X18\n").unwrap();
+                let (_, moves, _) = cut_program_measured(&s, &mut h, &prog, Some(tool)).unwrap();
+                moves[2].axial
+            };
+            let (sliver, real) = (axial(0.09), axial(0.59));
+            assert!(
+                sliver < 0.01,
+                "{tool:?}: a 0.09 mm sliver counts {sliver} mm"
+            );
+            assert!(real > 1.0, "{tool:?}: a 0.59 mm cut counts only {real} mm");
         }
     }
 
