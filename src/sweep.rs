@@ -81,6 +81,18 @@ impl Sweep {
         (lo <= hi).then_some((lo, hi))
     }
 
+    /// Distance in XY from the move's axis (the segment a -> b) to the
+    /// cell at offset w from a.
+    #[inline]
+    pub fn axis_distance(&self, wx: f64, wy: f64) -> f64 {
+        let t = if self.axy > 0.0 {
+            ((wx * self.d.x + wy * self.d.y) / self.axy).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.rho(wx, wy, t)
+    }
+
     #[inline]
     pub fn rho(&self, wx: f64, wy: f64, t: f64) -> f64 {
         let (x, y) = (wx - t * self.d.x, wy - t * self.d.y);

@@ -783,7 +783,7 @@ impl ToolpathJob {
             .zip(&files)
             .map(|(p, f)| p.moved(plan.shift - f.2.shift))
             .collect();
-        let judged = t.time("judge", || judge::run(&progs, relief, &plan, z_shift, cell))?;
+        let mut judged = t.time("judge", || judge::run(&progs, relief, &plan, z_shift, cell))?;
         let groups = &files;
         if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.of(tl)) {
             let what = format!(
@@ -842,8 +842,7 @@ impl ToolpathJob {
                 extra.push(note(by));
             }
         }
-        let mut engagement = judged.engagement.clone();
-        engagement.shift_lines(added(&extra, times[0]));
+        judged.engagement.shift_lines(added(&extra, times[0]));
         let mut out = Outputs::default();
         let (mut lines, mut time_s) = (0, 0.0);
         let mut written = Vec::new();
@@ -879,7 +878,7 @@ impl ToolpathJob {
             stepover_mm: step,
             written,
             notes,
-            engagement,
+            engagement: judged.engagement,
             residual: judged.residual,
             gouge: judged.gouge,
             rapid_mm,

@@ -448,22 +448,12 @@ fn cut_impl<const STATS: bool>(
                             let new = (z as f32).max(floor);
                             if STATS {
                                 let (ex, ey) = (x - seg.b.x, y - seg.b.y);
-                                // how far from the move's axis line
-                                let off = {
-                                    let (dx, dy) = (seg.b.x - seg.a.x, seg.b.y - seg.a.y);
-                                    let l2 = dx * dx + dy * dy;
-                                    let t = if l2 > 0.0 {
-                                        (((x - sw.a.x) * dx + wy * dy) / l2).clamp(0.0, 1.0)
-                                    } else {
-                                        0.0
-                                    };
-                                    (x - sw.a.x - t * dx).hypot(wy - t * dy)
-                                };
+                                let wx = x - sw.a.x;
                                 mc.add(
                                     *cell - new,
-                                    ((x - sw.a.x) * nx + wy * ny) as f32,
+                                    (wx * nx + wy * ny) as f32,
                                     ex * ex + ey * ey <= core2,
-                                    engage::shaved(off as f32, r as f32),
+                                    engage::shaved(sw.axis_distance(wx, wy) as f32, r as f32),
                                 );
                             }
                             *cell = new;
