@@ -69,6 +69,59 @@ fn default_jobs_stay_within_the_depth_of_cut_and_never_plunge() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// A coarse relief (the 48 px demo, 60 mm wide, 3 mm deep: 1.25 mm
+/// samples) is judged as `simulate` sees it with its default fine cells:
+/// no tool cuts deeper than the material allows, and the job's own
+/// figures agree with the simulator's. (Beside the touch-off pad a strip
+/// a roughing stepover wide used to stand at the stock top, and the
+/// finish met it 1.817 mm deep where the judge's coarse cells saw 0.70.)
+#[test]
+fn a_coarse_relief_is_judged_as_the_simulator_sees_it() {
+    let d = scratch("safe-coarse");
+    let (relief, job) = (d.join("r.png"), d.join("job.nc"));
+    demo_relief(&relief, "48");
+    let out = run(&[
+        "toolpath",
+        relief.to_str().unwrap(),
+        "-o",
+        job.to_str().unwrap(),
+    ]);
+    ok(&out);
+    let stdout = String::from_utf8_lossy(&out.stdout).to_string();
+    let text = std::fs::read_to_string(&job).unwrap();
+    assert!(text.contains("(touch-off pad: "), "{}", &text[..1500]);
+    let rep = simulate_report(&job, &relief, &d.join("cut.png"), &[]);
+    let e = &rep["engagement"];
+    for t in e["tools"].as_array().unwrap() {
+        let (name, axial) = (
+            t["tool"].as_str().unwrap(),
+            t["max_axial_mm"].as_f64().unwrap(),
+        );
+        // the job's own figure: "ball:3.175: depth of cut up to 0.750 mm"
+        let own: f64 = stdout
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("{name}: depth of cut up to ")))
+            .and_then(|l| l.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{name} in {stdout}"));
+        eprintln!("{name}: simulated {axial:.3} mm, judged {own:.3} mm");
+        assert!(axial <= 1.59 + 0.005, "{name}: {axial} mm");
+        assert!(
+            (axial - own).abs() <= 0.1,
+            "{name}: {axial} simulated, {own} judged"
+        );
+    }
+    // (a layer's ramp, run backwards over a step its pass climbs, used to
+    // plunge 0.1 mm)
+    assert!(
+        e["plunges"].as_array().unwrap().is_empty(),
+        "{}",
+        e["plunges"]
+    );
+    assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 #[test]
 fn a_full_depth_pass_is_refused_unless_allowed() {
     let d = scratch("safe-deep");
@@ -106,15 +159,16 @@ fn a_full_depth_pass_is_refused_unless_allowed() {
         &text[..1500]
     );
     // the lines named are the written file's, comments put in after the
-    // judging counted: `simulate` on the same cells (one per pixel at
-    // 120 px) names the very same lines and figures
+    // judging counted: `simulate` on the same cells (three per pixel at
+    // 120 px: at most half the tools' radius) names the very same lines
+    // and figures
     let sim = run(&[
         "simulate",
         job.to_str().unwrap(),
         "--relief",
         d.join("job-relief.png").to_str().unwrap(),
         "--oversample",
-        "1",
+        "3",
         "-o",
         d.join("cut.png").to_str().unwrap(),
     ]);

@@ -261,11 +261,13 @@ impl Frame {
 }
 
 /// The stock's cell size for planning and judging a job: the relief's
-/// pitch divided by the odd whole number that makes it at most the
+/// pitch divided by the odd whole number that makes it at most half the
 /// smallest tool radius `r` (so that relief samples stay cell centres,
-/// and no tool's footprint falls between cell centres).
+/// and what a tool leaves between its passes shows). At a tool radius per
+/// cell, the 48 px demo's roughing ramped down onto material its cells
+/// showed cut: `simulate` counted 5 plunges the judge did not see.
 pub fn cell(pitch: f64, r: f64) -> f64 {
-    let k = (pitch / r - 1e-9).ceil().max(1.0) as usize;
+    let k = (2.0 * pitch / r - 1e-9).ceil().max(1.0) as usize;
     let k = if k.is_multiple_of(2) { k + 1 } else { k };
     pitch / k as f64
 }
@@ -344,11 +346,13 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cells_are_the_smallest_radius_or_finer() {
-        assert_eq!(cell(0.8, 1.5), 0.8);
-        // 6 mm samples, a 1.5 mm radius: 6 / 5 (4 is even)
-        assert!((cell(6.0, 1.5) - 6.0 / 5.0).abs() < 1e-12);
-        assert!((cell(2.0, 1.5) - 2.0 / 3.0).abs() < 1e-12);
+    fn cells_are_half_the_smallest_radius_or_finer() {
+        assert_eq!(cell(0.7, 1.5), 0.7);
+        // 6 mm samples, a 1.5 mm radius: 6 / 9 (8 is even)
+        assert!((cell(6.0, 1.5) - 6.0 / 9.0).abs() < 1e-12);
+        // 1.25 mm samples (the 48 px demo at 60 mm), a 3.175 mm ball
+        assert!((cell(1.25, 1.5875) - 1.25 / 3.0).abs() < 1e-12);
+        assert_eq!(cell(0.75, 1.5), 0.75);
     }
 
     #[test]

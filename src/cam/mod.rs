@@ -431,6 +431,22 @@ impl ToolpathJob {
             }
             None => None,
         };
+        // the roughing's stepover (its rows' and layers' distance apart)
+        let rough_step = match &rough {
+            Some(r) => {
+                let rt = m.tool(&r.tool)?;
+                let rc = material
+                    .as_ref()
+                    .and_then(|mt| mt.cutting_for(rt.working_diameter()));
+                Some(
+                    r.stepover
+                        .or(rc.as_ref().map(|c| Stepover::Percent(c.rough_stepover)))
+                        .unwrap_or(Stepover::Percent(40.0))
+                        .mm(&rt)?,
+                )
+            }
+            None => None,
+        };
         // the touch-off pad: Z0 for the next tool after roughing
         let pad = (rough.is_some() && self.z_zero == ZZero::Top)
             .then(|| layout::pad_site(relief, PAD.min(0.25 * pw.min(ph))));
@@ -440,9 +456,15 @@ impl ToolpathJob {
             HeightField::new(z, relief.pitch_mm())
         });
         let hf_main = hf_pad.as_ref().unwrap_or(&hf);
-        // finishing keeps off the pad (and a tool radius round it) until
-        // the pad's own turn at the end
-        let keep_out = pad.map(|p| p.2 / 2.0 + tool.radius() + 0.5);
+        // finishing keeps off the pad until the pad's own turn at the end:
+        // off the pad, the strip beside it that rows a stepover apart
+        // (roughing's, and the finishing tool's layers at 40%) leave
+        // standing, and a tool radius round them. (Rows keep off the pad
+        // where their tool would touch it, so the nearest row's reach can
+        // stop up to a stepover short of it: on the 48 px demo a strip
+        // 1.2 mm wide stood at the stock top beside the pad.)
+        let strip = rough_step.unwrap_or(0.0).max(0.4 * tool.working_diameter());
+        let keep_out = pad.map(|p| p.2 / 2.0 + strip + tool.radius() + 0.5);
         let off_pad = |x: f64, y: f64| match (pad, keep_out) {
             (Some(p), Some(k)) => (x - p.0).abs() > k || (y - p.1).abs() > k,
             _ => true,
@@ -481,11 +503,7 @@ impl ToolpathJob {
                     own
                 }
             });
-            let rstep = r
-                .stepover
-                .or(rc.as_ref().map(|c| Stepover::Percent(c.rough_stepover)))
-                .unwrap_or(Stepover::Percent(40.0))
-                .mm(&rt)?;
+            let rstep = rough_step.unwrap_or(rt.radius());
             if !(step_down.is_finite() && step_down > 0.0) {
                 bail!("--step-down {step_down}: must be positive");
             }

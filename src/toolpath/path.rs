@@ -845,6 +845,16 @@ pub fn travel_height(hf: &HeightField, tool: &Tool, lift: f64, a: DVec3, b: DVec
 /// RAMP_LEGS, steeper beyond that); only a pass shorter than a quarter of
 /// the radius plunges.
 pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
+    // where the pass steps straight up or down (a corner over a sample, or
+    // a move raised by the check), the ramp keeps to the higher side:
+    // run backwards, a step up would be a plunge
+    let corner_top = |pts: &[DVec3], i: usize| {
+        let same = |j: usize| pts.get(j).filter(|q| q.truncate() == pts[i].truncate());
+        [i.checked_sub(1).and_then(same), same(i + 1)]
+            .into_iter()
+            .flatten()
+            .fold(pts[i].z, |z, q| z.max(q.z))
+    };
     let depth = top - pts[0].z;
     let mut len = 0.0;
     let mut m = 0;
@@ -870,7 +880,7 @@ pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
         for i in idx {
             let prev = *out.last().unwrap();
             dist += (pts[i] - prev).truncate().length();
-            let z = (top - dist * slope).max(pts[i].z);
+            let z = (top - dist * slope).max(corner_top(pts, i));
             out.push(DVec3::new(pts[i].x, pts[i].y, z));
         }
     }
