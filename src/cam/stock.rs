@@ -156,14 +156,18 @@ impl Planned {
     }
 
     /// The first point of `pts` reached by a drop steeper than 45 degrees
-    /// that ends in material (more than a scallop under the tool's axis).
+    /// that ends in material (more than a scallop under the tool's axis,
+    /// within a quarter radius as the simulator judges it, and a cell
+    /// more: the rim of a neighbouring row's cut can fall between these
+    /// cells and not between the simulator's finer ones).
     fn steep_drop(&self, pts: &[DVec3], r: f64) -> Option<usize> {
+        let near = r / 4.0 + self.stock.pitch;
         (1..pts.len()).find(|&i| {
             let (a, b) = (pts[i - 1], pts[i]);
             let drop = a.z - b.z;
             drop > 0.05
                 && drop > (b - a).truncate().length()
-                && self.highest(b.x, b.y, r / 4.0) - b.z > crate::sim::engage::PLUNGE_SKIN as f64
+                && self.highest(b.x, b.y, near) - b.z > crate::sim::engage::PLUNGE_SKIN as f64
         })
     }
 
