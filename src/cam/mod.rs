@@ -431,19 +431,20 @@ impl ToolpathJob {
             }
             None => None,
         };
-        // the roughing's stepover (its rows' and layers' distance apart)
-        let rough_step = match &rough {
+        // the roughing tool, its material entry and its stepover (its
+        // rows' and layers' distance apart, which the pad's keep-out needs)
+        let rough_cut = match &rough {
             Some(r) => {
                 let rt = m.tool(&r.tool)?;
                 let rc = material
                     .as_ref()
                     .and_then(|mt| mt.cutting_for(rt.working_diameter()));
-                Some(
-                    r.stepover
-                        .or(rc.as_ref().map(|c| Stepover::Percent(c.rough_stepover)))
-                        .unwrap_or(Stepover::Percent(40.0))
-                        .mm(&rt)?,
-                )
+                let rstep = r
+                    .stepover
+                    .or(rc.as_ref().map(|c| Stepover::Percent(c.rough_stepover)))
+                    .unwrap_or(Stepover::Percent(40.0))
+                    .mm(&rt)?;
+                Some((r, rt, rc, rstep))
             }
             None => None,
         };
@@ -463,7 +464,10 @@ impl ToolpathJob {
         // where their tool would touch it, so the nearest row's reach can
         // stop up to a stepover short of it: on the 48 px demo a strip
         // 1.2 mm wide stood at the stock top beside the pad.)
-        let strip = rough_step.unwrap_or(0.0).max(0.4 * tool.working_diameter());
+        let strip = rough_cut
+            .as_ref()
+            .map_or(0.0, |c| c.3)
+            .max(0.4 * tool.working_diameter());
         let keep_out = pad.map(|p| p.2 / 2.0 + strip + tool.radius() + 0.5);
         let off_pad = |x: f64, y: f64| match (pad, keep_out) {
             (Some(p), Some(k)) => (x - p.0).abs() > k || (y - p.1).abs() > k,
@@ -481,12 +485,8 @@ impl ToolpathJob {
                 100.0 * s.share()
             ));
         }
-        if let Some(r) = &rough {
-            let rt = m.tool(&r.tool)?;
+        if let Some((r, rt, rc, rstep)) = rough_cut {
             let settings = self.settings(&m, &rt, material.as_ref(), &mut notes)?;
-            let rc = material
-                .as_ref()
-                .and_then(|mt| mt.cutting_for(rt.working_diameter()));
             // layers no deeper than the roughing tool may slot, nor than
             // the finishing tool may take off the terraces they leave
             // (the latter unless that would take more than twice the
@@ -503,7 +503,6 @@ impl ToolpathJob {
                     own
                 }
             });
-            let rstep = rough_step.unwrap_or(rt.radius());
             if !(step_down.is_finite() && step_down > 0.0) {
                 bail!("--step-down {step_down}: must be positive");
             }

@@ -848,7 +848,7 @@ pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
     // where the pass steps straight up or down (a corner over a sample, or
     // a move raised by the check), the ramp keeps to the higher side:
     // run backwards, a step up would be a plunge
-    let corner_top = |pts: &[DVec3], i: usize| {
+    let corner_top = |i: usize| {
         let same = |j: usize| pts.get(j).filter(|q| q.truncate() == pts[i].truncate());
         [i.checked_sub(1).and_then(same), same(i + 1)]
             .into_iter()
@@ -880,7 +880,7 @@ pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
         for i in idx {
             let prev = *out.last().unwrap();
             dist += (pts[i] - prev).truncate().length();
-            let z = (top - dist * slope).max(corner_top(pts, i));
+            let z = (top - dist * slope).max(corner_top(i));
             out.push(DVec3::new(pts[i].x, pts[i].y, z));
         }
     }
