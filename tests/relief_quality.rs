@@ -365,19 +365,24 @@ fn step_heights(h: &Grid<f32>, f: &Field) -> (Vec<f64>, Vec<f64>) {
 /// `--steps 0.3` on the crossed tubes and the bunny at 512 and 2048 px:
 /// one step per outline, 0.3 +- 0.06 mm across it two samples either side,
 /// never two within 3 samples. The issue asks 95% everywhere; what holds
-/// today is asserted (figures in the output): at 512 px the surfaces' own
-/// slope over four samples next to an outline (0.02-0.03 mm a sample)
-/// pushes many crossings over 0.36 mm.
+/// today is asserted (figures in the output). The relief is split into
+/// its two parts, the integrated steps (`unit_steps`) and the integrated
+/// slopes (the rest), to say why: the steps part alone measures 0.3 mm
+/// (median 0.298-0.299 three samples either side), while the slopes part
+/// adds the surfaces' own rise over the four samples (median 0.10 mm on
+/// the bunny at 512 px, 0.03 mm at 2048 px) and two samples either side
+/// cut the spread step's tail (median 0.27-0.28 mm).
 #[test]
 fn steps_are_one_clean_step_per_outline() {
     let step = 0.3;
     let p = params(Some(step));
-    // (model, px, least share of clean steps, most share of stacked ones)
-    for (model, res, clean, stacked_max) in [
-        ("tubes", 512, 0.78, 0.01),
-        ("stanford-bunny.obj", 512, 0.30, 0.10),
-        ("tubes", 2048, 0.95, 0.001),
-        ("stanford-bunny.obj", 2048, 0.87, 0.002),
+    // (model, px, least share of clean steps, most share of stacked ones,
+    // least share of the steps part within 0.06 mm three samples either side)
+    for (model, res, clean, stacked_max, exact) in [
+        ("tubes", 512, 0.78, 0.01, 0.96),
+        ("stanford-bunny.obj", 512, 0.30, 0.10, 0.89),
+        ("tubes", 2048, 0.95, 0.001, 0.96),
+        ("stanford-bunny.obj", 2048, 0.87, 0.002, 0.88),
     ] {
         let (h, f) = if model == "tubes" {
             let cam = Camera {
@@ -394,12 +399,39 @@ fn steps_are_one_clean_step_per_outline() {
         };
         let (two, three) = step_heights(&h, &f);
         let n = two.len() as f64;
-        let good = two.iter().filter(|d| (**d - step).abs() <= 0.06).count() as f64 / n;
+        let within = |v: &[f64]| v.iter().filter(|d| (**d - step).abs() <= 0.06).count() as f64 / n;
+        let good = within(&two);
         let stacked = three.iter().filter(|d| **d > 1.5 * step + 0.06).count() as f64 / n;
+        // the relief's two parts: its steps, and its integrated slopes
+        let k = step * f.n_fine as f64;
+        let steps = relievo::relief::unit_steps(&f, false).map(|v| (v * k) as f32);
+        let slopes = Grid::from_vec(
+            h.w,
+            h.h,
+            h.data.iter().zip(&steps.data).map(|(a, b)| a - b).collect(),
+        );
+        let (s2, s3) = step_heights(&steps, &f);
+        let (m2, _) = step_heights(&slopes, &f);
+        let median = |v: &[f64]| {
+            let mut v = v.to_vec();
+            v.sort_by(f64::total_cmp);
+            v[v.len() / 2]
+        };
         eprintln!(
-            "{model} at {res} px: {n} outline samples, {:.1}% with a step of 0.3 +- 0.06 mm, {:.2}% with two steps within 3 samples",
+            "{model} at {res} px: {n} outline samples, {:.1}% with a step of 0.3 +- 0.06 mm, \
+             {:.2}% with two steps within 3 samples; the steps part: median {:.3} mm two \
+             samples either side, {:.3} mm three ({:.1}% within 0.06); the slopes part: \
+             median {:.3} mm",
             100.0 * good,
-            100.0 * stacked
+            100.0 * stacked,
+            median(&s2),
+            median(&s3),
+            100.0 * within(&s3),
+            median(&m2)
+        );
+        assert!(
+            (median(&s3) - step).abs() <= 0.005 && within(&s3) >= exact,
+            "{model} at {res}: the steps part is not {step} mm"
         );
         assert!(n > 100.0);
         assert!(

@@ -175,6 +175,37 @@ fn spread_steps(g: &Grid<f32>) -> Grid<f32> {
     out
 }
 
+/// The field's slopes `gx`, `gy` integrated: free (Neumann) or with the
+/// background held at 0.
+fn solve(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: bool) -> Grid<f64> {
+    let n = field.gx.w.max(field.gx.h);
+    let div = poisson::divergence(gx, gy, 1.0 / n as f64);
+    if flat_background {
+        poisson::solve_masked(&div, &field.mask).0
+    } else {
+        poisson::solve_neumann(&div)
+    }
+}
+
+/// The unit steps at the field's outlines integrated on their own, in
+/// the units of the field's slopes (a unit step is 1 / `n_fine`): `build`
+/// adds them, scaled to `--steps` mm, to the integrated slopes, so a
+/// relief's steps are `steps_mm * n_fine` times this. Spread over about a
+/// sample with a free background; a flat background cannot take half a
+/// step's spread.
+pub fn unit_steps(field: &Field, flat_background: bool) -> Grid<f64> {
+    if flat_background {
+        solve(field, &field.sx, &field.sy, true)
+    } else {
+        solve(
+            field,
+            &spread_steps(&field.sx),
+            &spread_steps(&field.sy),
+            false,
+        )
+    }
+}
+
 /// Range (max - min) of a + c b.
 fn range(a: &Grid<f64>, b: &Grid<f64>, c: f64) -> f64 {
     let (lo, hi) = extent(
@@ -283,7 +314,6 @@ pub fn flatness(r: &Relief, field: &Field) -> Option<String> {
 pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -> Result<Relief> {
     p.validate()?;
     let (w, h) = (field.gx.w, field.gx.h);
-    let n = w.max(h);
     let height_mm = p.width_mm * h as f64 / w as f64;
     // a tilt's plane takes its rise out of the depth; the subject keeps
     // its own scale (and `--steps` its exact height) under it
@@ -333,26 +363,13 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                     lift_above_field(h, &field.mask);
                 }
             };
-            let solve = |gx: &Grid<f32>, gy: &Grid<f32>| {
-                let div = poisson::divergence(gx, gy, 1.0 / n as f64);
-                if p.flat_background {
-                    poisson::solve_masked(&div, &field.mask).0
-                } else {
-                    poisson::solve_neumann(&div)
-                }
-            };
+            let solve = |gx: &Grid<f32>, gy: &Grid<f32>| solve(field, gx, gy, p.flat_background);
             match p.steps_mm {
                 Some(s) if field.silhouette_edges > 0 => {
                     // the steps first: if they alone exceed the depth, the
                     // main solve is not worth doing
                     // a flat background cannot take half a step's spread
-                    let steps = t.time("poisson (steps)", || {
-                        if p.flat_background {
-                            solve(&field.sx, &field.sy)
-                        } else {
-                            solve(&spread_steps(&field.sx), &spread_steps(&field.sy))
-                        }
-                    });
+                    let steps = t.time("poisson (steps)", || unit_steps(field, p.flat_background));
                     let nf = field.n_fine as f64;
                     if s * nf * range(&steps, &steps, 0.0) >= subject {
                         bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");
