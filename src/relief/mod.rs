@@ -177,7 +177,7 @@ fn spread_steps(g: &Grid<f32>) -> Grid<f32> {
 
 /// The field's slopes `gx`, `gy` integrated: free (Neumann) or with the
 /// background held at 0.
-fn solve(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: bool) -> Grid<f64> {
+fn integrate(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: bool) -> Grid<f64> {
     let n = field.gx.w.max(field.gx.h);
     let div = poisson::divergence(gx, gy, 1.0 / n as f64);
     if flat_background {
@@ -195,9 +195,9 @@ fn solve(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: bool) -
 /// step's spread.
 pub fn unit_steps(field: &Field, flat_background: bool) -> Grid<f64> {
     if flat_background {
-        solve(field, &field.sx, &field.sy, true)
+        integrate(field, &field.sx, &field.sy, true)
     } else {
-        solve(
+        integrate(
             field,
             &spread_steps(&field.sx),
             &spread_steps(&field.sy),
@@ -363,12 +363,12 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                     lift_above_field(h, &field.mask);
                 }
             };
-            let solve = |gx: &Grid<f32>, gy: &Grid<f32>| solve(field, gx, gy, p.flat_background);
+            let solve =
+                |gx: &Grid<f32>, gy: &Grid<f32>| integrate(field, gx, gy, p.flat_background);
             match p.steps_mm {
                 Some(s) if field.silhouette_edges > 0 => {
                     // the steps first: if they alone exceed the depth, the
                     // main solve is not worth doing
-                    // a flat background cannot take half a step's spread
                     let steps = t.time("poisson (steps)", || unit_steps(field, p.flat_background));
                     let nf = field.n_fine as f64;
                     if s * nf * range(&steps, &steps, 0.0) >= subject {
