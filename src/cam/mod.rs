@@ -1100,7 +1100,7 @@ impl ToolpathJob {
         passes
             .into_iter()
             .map(|p| Pass {
-                pts: path::verify(hf, tool, &path::merge(&p.pts, self.tolerance)),
+                pts: path::verify(hf, tool, &path::merge(&p.pts, self.tolerance), false),
                 clear_z: p.clear_z,
             })
             .collect()
@@ -1179,7 +1179,7 @@ impl ToolpathJob {
             .par_iter()
             .map(|l| {
                 let m = path::merge(l, self.tolerance);
-                path::check_and_refine(hf, &rt, &m, floor, self.tolerance)
+                path::check_and_refine(hf, &rt, &m, floor, self.tolerance, None)
             })
             .collect();
         let n_pencil = pencil.len();
@@ -1319,14 +1319,18 @@ impl ToolpathJob {
             .map(|(whole, g)| {
                 let cl = raster::drop_rows(hf, tool, &g, floor);
                 let raw = cl.iter().map(Vec::len).sum::<usize>();
-                let main = match (self.direction, whole) {
+                // (pass, the CL points it was merged from)
+                let main: Vec<(Vec<DVec3>, Vec<DVec3>)> = match (self.direction, whole) {
                     (None, true) => vec![raster::zigzag(hf, tool, &cl, floor, tol, self.arcs)],
-                    (None, false) => cl.iter().map(|c| raster::thin(c, tol, self.arcs)).collect(),
+                    (None, false) => cl
+                        .into_iter()
+                        .map(|c| (raster::thin(&c, tol, self.arcs), c))
+                        .collect(),
                     (Some(_), _) => raster::one_way(&cl, climb, tol, self.arcs),
                 };
                 let checked = main
                     .iter()
-                    .map(|c| path::check_and_refine(hf, tool, c, floor, tol))
+                    .map(|(c, drops)| path::check_and_refine(hf, tool, c, floor, tol, Some(drops)))
                     .collect();
                 (checked, raw)
             })

@@ -97,7 +97,7 @@ pub fn linked(
         if let Some(last) = out.last_mut() {
             let (a, b) = (last[last.len() - 1], p[0]);
             if (b - a).truncate().length() <= gap {
-                let link = path::check_and_refine(hf, tool, &[a, b], floor, tol);
+                let link = path::check_and_refine(hf, tool, &[a, b], floor, tol, None);
                 last.extend_from_slice(&link[1..link.len() - 1]);
                 last.extend_from_slice(&p);
                 continue;

@@ -535,9 +535,101 @@ pub const CHECK: f64 = 2e-4;
 /// How deep the straight move a -> b would cut into the relief's surface
 /// (<= 0 when it cuts none): the exact swept tool against every sample it
 /// passes, then the drop-cutter at probes between them (`probe_gouge`).
-pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
-    let at_samples = sample_gouge(hf, tool, a, b);
+///
+/// `ends_on_cl`: a and b are drop-cutter points (or above them), where
+/// the tool touches no sample, which spares the sweep behind the lower
+/// end (`sample_gouge`).
+pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: bool) -> f64 {
+    let at_samples = sample_gouge(hf, tool, a, b, ends_on_cl);
     at_samples.max(probe_gouge(hf, tool, a, b, at_samples.max(0.5 * CHECK)))
+}
+
+/// `move_gouge` for a ball's move that passes over `drops`, the CL points
+/// dropped along it (in order, the first straight below a, the last
+/// below b). They are probes already made, with their clearance under
+/// the move known: the CL surface bends down nowhere faster than the
+/// ball (curvature 1 / R), so between two of them g apart it rises at
+/// most g^2 / (8 R) over the chord of their clearances. Only gaps where
+/// that bound reaches CHECK / 2 are probed, as `probe_gouge` would; on
+/// the 2048 px bunny's raster they are a few in a hundred.
+fn dropped_move_gouge(
+    hf: &HeightField,
+    r: f64,
+    tool: &Tool,
+    a: DVec3,
+    b: DVec3,
+    drops: &[DVec3],
+) -> f64 {
+    let at_samples = sample_gouge(hf, tool, a, b, true);
+    let floor = at_samples.max(0.5 * CHECK);
+    let d = b - a;
+    let len2 = d.truncate().length_squared();
+    // the move's height straight above q
+    let above = |q: DVec3| {
+        let t = if len2 > 0.0 {
+            ((q - a).truncate().dot(d.truncate()) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        a.z + d.z * t
+    };
+    let spacing = probe_spacing(hf, tool);
+    let mut stack = Vec::new();
+    let mut hint = None;
+    let mut worst = at_samples;
+    let mut clear0 = above(drops[0]) - drops[0].z;
+    for w in drops.windows(2) {
+        let clear1 = above(w[1]) - w[1].z;
+        worst = worst.max(-clear0).max(-clear1);
+        let g = (w[1] - w[0]).truncate().length();
+        if g * g / (8.0 * r) - clear0.min(clear1) > 0.5 * CHECK {
+            let n = (g / spacing).ceil() as usize;
+            for k in 1..n.min(1 << 20) {
+                let q = w[0] + (w[1] - w[0]) * (k as f64 / n as f64);
+                let z = above(q);
+                if let Some((c, at)) = hf.drop_above(tool, q.x, q.y, z + floor, hint, &mut stack) {
+                    hint = Some(at);
+                    worst = worst.max(c - z);
+                }
+            }
+        }
+        clear0 = clear1;
+    }
+    worst
+}
+
+/// How far apart `probe_gouge` probes a move. Between creases the CL
+/// surface is smooth, bent at most as the tip is: probes this far apart
+/// miss at most CHECK / 2 of a bulge. A ball's CL surface is the ball's
+/// centre surface and bends nowhere more than the ball (at 2048 px the
+/// spacing is 0.036 mm, not half a sample: the 2048 px bunny raster 2.92
+/// -> 2.43 s, same gouge); a tapered ball's flank makes peaks over
+/// vertices, so its probes stay at least two a sample.
+fn probe_spacing(hf: &HeightField, tool: &Tool) -> f64 {
+    match *tool {
+        Tool::Ball { d } => (2.0 * CHECK * d).sqrt(),
+        Tool::TaperBall { tip_r, .. } => (4.0 * CHECK * tip_r).sqrt().min(0.5 * hf.pitch),
+        _ => 0.5 * hf.pitch,
+    }
+}
+
+/// For each move of `pts`, the stretch of `drops` (the pass's dropped CL
+/// points, in order) it passes over: merging keeps a subsequence of them,
+/// lifted but never moved in XY. None where `pts` is not such a
+/// subsequence (arcs' chords end between dropped points).
+fn stretches(pts: &[DVec3], drops: &[DVec3]) -> Option<Vec<(usize, usize)>> {
+    let mut at = Vec::with_capacity(pts.len());
+    let mut j = 0;
+    for p in pts {
+        while j < drops.len() && drops[j].truncate() != p.truncate() {
+            j += 1;
+        }
+        if j == drops.len() {
+            return None;
+        }
+        at.push(j);
+    }
+    Some(at.windows(2).map(|w| (w[0], w[1])).collect())
 }
 
 /// The highest the CL surface rises above the move a -> b at probes where
@@ -574,18 +666,7 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
         cross(a.x + top - a.y, d.x - d.y, 0.0);
     }
     ts.sort_unstable_by(f64::total_cmp);
-    // between creases the CL surface is smooth, bent at most as the tip
-    // is: probes this far apart miss at most CHECK / 2 of a bulge. A
-    // ball's CL surface is the ball's centre surface and bends nowhere
-    // more than the ball (at 2048 px the spacing is 0.036 mm, not half a
-    // sample: the 2048 px bunny raster 2.92 -> 2.43 s, same gouge); a
-    // tapered ball's flank makes peaks over vertices, so its probes stay
-    // at least two a sample
-    let spacing = match *tool {
-        Tool::Ball { d } => (2.0 * CHECK * d).sqrt(),
-        Tool::TaperBall { tip_r, .. } => (4.0 * CHECK * tip_r).sqrt().min(0.5 * p),
-        _ => 0.5 * p,
-    };
+    let spacing = probe_spacing(hf, tool);
     let len = d.truncate().length();
     let mut probes: Vec<f64> = Vec::with_capacity(2 * ts.len());
     for w in ts.windows(2) {
@@ -612,7 +693,13 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
 
 /// How deep the straight move a -> b would cut below the samples it passes
 /// over (<= 0 when it cuts none), with the exact swept tool.
-fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
+///
+/// With `ends_on_cl` (neither end's tool touches a sample), the samples
+/// behind the lower end (or behind both, on a level move) are left out:
+/// over them the swept tool is lowest at that end, which comes nearer and
+/// lower at once, and there it touches nothing. On a short move that is
+/// most of what the tool passes over.
+fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: bool) -> f64 {
     use crate::sweep::{cells_between, Sweep};
     let sw = Sweep::new(a, b, *tool);
     let ball = matches!(tool, Tool::Ball { .. }).then(|| BallSweep::new(a, b, sw.r));
@@ -626,10 +713,12 @@ fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
     };
     use super::dropcutter::ROW_BLOCK;
     let low_tip = a.z.min(b.z);
+    let slab = Slab::new(a, b, ends_on_cl);
     for j in j0..=j1 {
         let (_, y) = hf.centre(0, j);
         let Some((i0, i1)) = sw
             .row_span(y)
+            .and_then(|(xl, xh)| slab.clip(xl, xh, y))
             .and_then(|(xl, xh)| cells_between(xl, xh, p, z.w))
         else {
             continue;
@@ -664,6 +753,60 @@ fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3) -> f64 {
         }
     }
     worst
+}
+
+/// The part of the plane, across a move's XY line, that its sample sweep
+/// must cover: between the perpendiculars at its ends, or beyond the one
+/// at its higher end (`sample_gouge`).
+struct Slab {
+    a: glam::DVec2,
+    /// Unit direction of the move in XY (zero: no slab).
+    u: glam::DVec2,
+    /// The along-move range kept (from a).
+    lo: f64,
+    hi: f64,
+}
+
+impl Slab {
+    fn new(a: DVec3, b: DVec3, ends_on_cl: bool) -> Slab {
+        let d = (b - a).truncate();
+        let len = d.length();
+        let on = ends_on_cl && len > 1e-9;
+        // a sample on a perpendicular is kept: the margin is for rounding
+        let m = 1e-9;
+        Slab {
+            a: a.truncate(),
+            u: if on { d / len } else { glam::DVec2::ZERO },
+            lo: if on && b.z >= a.z {
+                -m
+            } else {
+                f64::NEG_INFINITY
+            },
+            hi: if on && b.z <= a.z {
+                len + m
+            } else {
+                f64::INFINITY
+            },
+        }
+    }
+
+    /// [xl, xh] on the row at `y`, cut to the slab; None when empty.
+    fn clip(&self, xl: f64, xh: f64, y: f64) -> Option<(f64, f64)> {
+        if self.u == glam::DVec2::ZERO {
+            return Some((xl, xh));
+        }
+        // along(x) = (x - a.x) u.x + (y - a.y) u.y
+        let base = (y - self.a.y) * self.u.y;
+        if self.u.x.abs() < 1e-12 {
+            return (self.lo..=self.hi).contains(&base).then_some((xl, xh));
+        }
+        let (p, q) = (
+            self.a.x + (self.lo - base) / self.u.x,
+            self.a.x + (self.hi - base) / self.u.x,
+        );
+        let (lo, hi) = (xl.max(p.min(q)), xh.min(p.max(q)));
+        (lo <= hi).then_some((lo, hi))
+    }
 }
 
 /// The ball's swept surface with everything per move computed once, in a
@@ -758,22 +901,37 @@ impl BallSweep {
 /// between points, over convex detail) are dropped again with refinement,
 /// merged and checked again. Refining only there keeps the drop-cutter to
 /// about one query per point instead of four.
+///
+/// `drops`: the CL points `pts` was merged from, in order, which a ball's
+/// check takes for probes (`dropped_move_gouge`).
 pub fn check_and_refine(
     hf: &HeightField,
     tool: &Tool,
     pts: &[DVec3],
     floor: f64,
     tol: f64,
+    drops: Option<&[DVec3]>,
 ) -> Vec<DVec3> {
     use rayon::prelude::*;
     if pts.len() < 2 {
         return pts.to_vec();
     }
+    let over = match (tool, drops) {
+        (Tool::Ball { d }, Some(drops)) => stretches(pts, drops).map(|s| (0.5 * d, drops, s)),
+        _ => None,
+    };
     let fixes: Vec<Option<Vec<DVec3>>> = pts
         .par_windows(2)
-        .map(|w| {
+        .enumerate()
+        .map(|(k, w)| {
             let (a, b) = (w[0], w[1]);
-            let g = move_gouge(hf, tool, a, b);
+            let g = match &over {
+                Some((r, drops, s)) => {
+                    let (i, j) = s[k];
+                    dropped_move_gouge(hf, *r, tool, a, b, &drops[i..=j])
+                }
+                None => move_gouge(hf, tool, a, b, false),
+            };
             if g <= CHECK {
                 return None;
             }
@@ -785,7 +943,7 @@ pub fn check_and_refine(
                 })
                 .collect();
             let cl = drop_along(hf, tool, &xy, floor, Refine::Full);
-            Some(verify(hf, tool, &merge(&cl, tol)))
+            Some(verify(hf, tool, &merge(&cl, tol), true))
         })
         .collect();
     let mut out = vec![pts[0]];
@@ -805,14 +963,17 @@ pub fn check_and_refine(
 /// cut (up at its start, across, down onto its end), which leaves a little
 /// material but never gouges. Catches what refinement between CL points
 /// cannot see, such as a sample meeting a flat tool's rim between checks.
-pub fn verify(hf: &HeightField, tool: &Tool, pts: &[DVec3]) -> Vec<DVec3> {
+///
+/// `ends_on_cl`: every point of `pts` is a drop-cutter point or above one
+/// (`move_gouge`).
+pub fn verify(hf: &HeightField, tool: &Tool, pts: &[DVec3], ends_on_cl: bool) -> Vec<DVec3> {
     use rayon::prelude::*;
     if pts.len() < 2 {
         return pts.to_vec();
     }
     let gouges: Vec<f64> = pts
         .par_windows(2)
-        .map(|w| move_gouge(hf, tool, w[0], w[1]))
+        .map(|w| move_gouge(hf, tool, w[0], w[1], ends_on_cl))
         .collect();
     let mut out = vec![pts[0]];
     for (w, &g) in pts.windows(2).zip(&gouges) {
@@ -887,4 +1048,133 @@ pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
     out.pop(); // the start again, at its own depth:
     out.extend_from_slice(pts);
     out
+}
+
+#[cfg(test)]
+mod check_tests {
+    use super::*;
+    use crate::grid::Grid;
+
+    /// Waves, a little noise and a raised disc whose rim is a step one
+    /// sample wide, `w` samples square, 0.05 mm apart.
+    fn field(w: usize, seed: u64) -> HeightField {
+        let mut s = seed;
+        let mut rnd = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let z = (0..w * w)
+            .map(|k| {
+                let (x, y) = ((k % w) as f64, (k / w) as f64);
+                let (cx, cy) = (x - w as f64 * 0.6, y - w as f64 * 0.4);
+                let disc = if cx * cx + cy * cy < (w as f64 * 0.2).powi(2) {
+                    0.3
+                } else {
+                    0.0
+                };
+                -2.0 + 0.5 * (x / 9.0).sin() * (y / 7.0).cos() + disc + 0.002 * rnd()
+            })
+            .collect();
+        HeightField::new(Grid::from_vec(w, w, z), 0.05)
+    }
+
+    /// Leaving out the sweep behind a move's lower end (both ends drop-
+    /// cutter points, or lifted above them) finds every cut the whole
+    /// sweep finds, to the bit: for a ball, a flat and a V tool, level,
+    /// rising and falling moves of 0.05-3 mm in every direction.
+    #[test]
+    fn the_sweep_behind_the_lower_end_finds_nothing_more() {
+        let hf = field(96, 3);
+        let mut s = 99u64;
+        let mut rnd = move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut cutting = 0;
+        for spec in ["ball:1", "flat:0.8", "vbit:90:1.2"] {
+            let tool = Tool::parse(spec).unwrap();
+            for _ in 0..400 {
+                let (x, y) = (0.5 + 3.8 * rnd(), 0.5 + 3.8 * rnd());
+                let (len, ang) = (0.05 + 3.0 * rnd(), std::f64::consts::TAU * rnd());
+                let (x2, y2) = (x + len * ang.cos(), y + len * ang.sin());
+                let (Some(za), Some(zb)) = (hf.drop(&tool, x, y), hf.drop(&tool, x2, y2)) else {
+                    continue;
+                };
+                // ends on the CL surface, or one lifted by up to 0.1 mm
+                let lift = if rnd() < 0.5 { 0.0 } else { 0.1 * rnd() };
+                let (a, b) = (DVec3::new(x, y, za), DVec3::new(x2, y2, zb + lift));
+                let whole = sample_gouge(&hf, &tool, a, b, false);
+                let part = sample_gouge(&hf, &tool, a, b, true);
+                if whole > 0.0 {
+                    cutting += 1;
+                }
+                // (a touch at an end itself is rounding: 2e-16 mm)
+                assert!(
+                    (whole.max(1e-9) - part.max(1e-9)).abs() <= 1e-12,
+                    "{spec}: {a} -> {b} cuts {whole} with the whole sweep, {part} without the lower end's"
+                );
+            }
+        }
+        assert!(cutting > 100, "only {cutting} moves cut");
+    }
+
+    /// A ball's merged rows (points up to 2.4 samples apart) checked with
+    /// their dropped points as probes
+    /// flag every move a dense scan of the CL surface finds cutting more
+    /// than CHECK and a half (the probes' own allowance), and the moves
+    /// the probes of `move_gouge` flag, but for the few right at CHECK.
+    #[test]
+    fn dropped_points_probe_as_well_as_probes() {
+        let hf = field(128, 5);
+        let tool = Tool::parse("ball:1.5").unwrap();
+        let (mut moves, mut dense_flags, mut differ) = (0, 0, 0);
+        for row in 0..24 {
+            let y = 0.6 + row as f64 * 0.21;
+            // points up to 2.4 samples apart, unrefined: the CL surface
+            // bulges between them
+            let step = 0.05 * (1.0 + 0.07 * row as f64);
+            let xy: Vec<(f64, f64)> = (0..=(5.4 / step) as usize)
+                .map(|i| (0.5 + i as f64 * step, y))
+                .collect();
+            let drops = drop_along(&hf, &tool, &xy, -10.0, Refine::None);
+            for tol in [0.005, 0.02] {
+                let pts = merge(&drops, tol);
+                let s = stretches(&pts, &drops).expect("a merged row is a subsequence");
+                for (k, w) in pts.windows(2).enumerate() {
+                    let (a, b) = (w[0], w[1]);
+                    let (i, j) = s[k];
+                    let by_drops = dropped_move_gouge(&hf, 0.75, &tool, a, b, &drops[i..=j]);
+                    let by_probes = move_gouge(&hf, &tool, a, b, true);
+                    let n = ((b - a).truncate().length() / 0.002).ceil() as usize + 1;
+                    let dense = (0..=n)
+                        .map(|t| {
+                            let q = a + (b - a) * (t as f64 / n as f64);
+                            hf.drop(&tool, q.x, q.y).unwrap() - q.z
+                        })
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    moves += 1;
+                    if dense > 1.5 * CHECK {
+                        dense_flags += 1;
+                        assert!(
+                            by_drops > CHECK,
+                            "{a} -> {b}: cuts {dense}, the dropped points say {by_drops}"
+                        );
+                    }
+                    if (by_drops > CHECK) != (by_probes > CHECK) {
+                        differ += 1;
+                        assert!(
+                            by_drops.max(by_probes) < 2.0 * CHECK,
+                            "{a} -> {b}: {by_drops} by the dropped points, {by_probes} by probes"
+                        );
+                    }
+                }
+            }
+        }
+        eprintln!("{moves} moves, {dense_flags} cut by more than 1.5 CHECK, {differ} flagged by one check only");
+        assert!(dense_flags > 0 && differ * 50 <= moves);
+    }
 }

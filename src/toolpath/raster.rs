@@ -117,7 +117,8 @@ pub fn drop_rows(
 
 /// The zigzag raster as one continuous CL polyline: rows (merged within
 /// `tol` in parallel) alternate in direction, and each link from a row's
-/// end to the next row's start is dropped and merged too.
+/// end to the next row's start is dropped and merged too. Also every CL
+/// point dropped, in the pass's order (the check's probes).
 pub fn zigzag(
     hf: &HeightField,
     tool: &Tool,
@@ -125,7 +126,7 @@ pub fn zigzag(
     floor: f64,
     tol: f64,
     arcs: bool,
-) -> Vec<DVec3> {
+) -> (Vec<DVec3>, Vec<DVec3>) {
     let passes: Vec<Vec<DVec3>> = cl
         .par_iter()
         .enumerate()
@@ -139,7 +140,15 @@ pub fn zigzag(
         })
         .collect();
     let mut out: Vec<DVec3> = Vec::new();
-    for pass in passes {
+    let mut drops: Vec<DVec3> = Vec::with_capacity(cl.iter().map(Vec::len).sum());
+    for (k, (pass, row)) in passes.into_iter().zip(cl).enumerate() {
+        let row_drops = |drops: &mut Vec<DVec3>| {
+            if k % 2 == 1 {
+                drops.extend(row.iter().rev());
+            } else {
+                drops.extend_from_slice(row);
+            }
+        };
         if let (Some(&a), Some(&b)) = (out.last(), pass.first()) {
             let n = ((b - a).truncate().length() / hf.pitch).ceil().max(1.0) as usize;
             let link: Vec<(f64, f64)> = (0..=n)
@@ -150,29 +159,39 @@ pub fn zigzag(
                 .collect();
             // the link, merged, replaces the pass's first point (merging
             // may lift a run's end, never lower it)
-            let l = merge(&drop_along(hf, tool, &link, floor, Refine::Bounds), tol);
+            let dropped = drop_along(hf, tool, &link, floor, Refine::Bounds);
+            let l = merge(&dropped, tol);
             out.extend_from_slice(&l[1..]);
             out.extend_from_slice(&pass[1..]);
+            drops.extend_from_slice(&dropped);
+            row_drops(&mut drops);
             continue;
         }
         out.extend(pass);
+        row_drops(&mut drops);
     }
-    out
+    (out, drops)
 }
 
 /// One-way rows, each its own pass merged within `tol`. Rows follow one
 /// another toward the left of their direction, so the uncut side is on the
 /// left: climb (material on the right of a clockwise spindle) runs them
 /// backwards.
-pub fn one_way(cl: &[Vec<DVec3>], climb: bool, tol: f64, arcs: bool) -> Vec<Vec<DVec3>> {
+/// Each pass comes with its dropped points in its own order.
+pub fn one_way(
+    cl: &[Vec<DVec3>],
+    climb: bool,
+    tol: f64,
+    arcs: bool,
+) -> Vec<(Vec<DVec3>, Vec<DVec3>)> {
     cl.par_iter()
         .map(|row| {
-            if climb {
-                let rev: Vec<DVec3> = row.iter().rev().copied().collect();
-                thin(&rev, tol, arcs)
+            let row: Vec<DVec3> = if climb {
+                row.iter().rev().copied().collect()
             } else {
-                thin(row, tol, arcs)
-            }
+                row.clone()
+            };
+            (thin(&row, tol, arcs), row)
         })
         .collect()
 }

@@ -642,7 +642,7 @@ pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3]) -> Vec<DVec3> {
     }
     let g: Vec<f64> = pts
         .par_windows(2)
-        .map(|w| move_gouge(hf, tool, w[0], w[1]).max(0.0))
+        .map(|w| move_gouge(hf, tool, w[0], w[1], true).max(0.0))
         .collect();
     let n = g.len();
     // a closed loop's ends are one point: it takes both neighbours' lift
