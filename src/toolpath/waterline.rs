@@ -516,12 +516,24 @@ fn peak(
         let mut top: Option<(f64, DVec3)> = None;
         for f in [0.5, 0.25, 0.75] {
             let q = a + (b - a) * f;
-            if let Some((z, c)) = hf.drop_above(tool, q.x, q.y, q.z + REFINE_DIP, hint, &mut stack)
-            {
-                hint = Some(c);
-                if top.is_none_or(|t| z > t.0) {
-                    top = Some((z, q));
+            // a rise that is concave along the move and nothing at its
+            // ends is at the quarters at most 1.5 times what it is in the
+            // middle: where the middle rises less than REFINE_DIP / 1.5,
+            // neither quarter needs a probe
+            let floor = if f == 0.5 {
+                REFINE_DIP / 1.5
+            } else {
+                REFINE_DIP
+            };
+            match hf.drop_above(tool, q.x, q.y, q.z + floor, hint, &mut stack) {
+                Some((z, c)) => {
+                    hint = Some(c);
+                    if z > q.z + REFINE_DIP && top.is_none_or(|t| z > t.0) {
+                        top = Some((z, q));
+                    }
                 }
+                None if f == 0.5 => return None,
+                None => {}
             }
         }
         return top;
