@@ -550,9 +550,11 @@ pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl:
 /// the move known. Between two of them g apart the CL surface, held by
 /// the ball, bends down as a circle of radius R at the gap's slope s
 /// does, (1 + s^2)^1.5 / R (the bound `probe_spacing` takes on level
-/// ground), and so rises at most that times g^2 / 8 over the chord of
-/// their clearances. Only gaps where that reaches CHECK / 2 are probed,
-/// as `probe_gouge` would; on the 2048 px bunny's raster a third of them.
+/// ground), and so rises over the move at most as far as that bend lifts
+/// a parabola through their clearances. Only gaps where that reaches
+/// CHECK / 2 are probed, as `probe_gouge` would: on the 2048 px bunny's
+/// raster 81,188 of 324,272 (157,340 probes, against ~880,000 along every
+/// move at the probes' spacing).
 fn dropped_move_gouge(
     hf: &HeightField,
     r: f64,
@@ -583,10 +585,18 @@ fn dropped_move_gouge(
         let clear1 = above(w[1]) - w[1].z;
         worst = worst.max(-clear0).max(-clear1);
         let g = (w[1] - w[0]).truncate().length();
-        // a circle of radius R sloping at s bends at (1 + s^2)^1.5 / R
+        // a circle of radius R sloping at s bends at (1 + s^2)^1.5 / R;
+        // the rise over the move at t of the gap is then at most
+        // -(1 - t) c0 - t c1 + k t (1 - t), k = bend g^2 / 2
         let s = if g > 0.0 { (w[1].z - w[0].z) / g } else { 0.0 };
-        let bend = (1.0 + s * s) * (1.0 + s * s).sqrt() / r;
-        if bend * g * g / 8.0 - clear0.min(clear1) > 0.5 * CHECK {
+        let k = 0.5 * (1.0 + s * s) * (1.0 + s * s).sqrt() / r * g * g;
+        let t = if k > 0.0 {
+            ((k + clear0 - clear1) / (2.0 * k)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let rise = -(1.0 - t) * clear0 - t * clear1 + k * t * (1.0 - t);
+        if rise > 0.5 * CHECK {
             let n = (g / spacing).ceil() as usize;
             for k in 1..n.min(1 << 20) {
                 let q = w[0] + (w[1] - w[0]) * (k as f64 / n as f64);
