@@ -598,8 +598,8 @@ fn dropped_move_gouge(
         let rise = -(1.0 - t) * clear0 - t * clear1 + k * t * (1.0 - t);
         if rise > 0.5 * CHECK {
             let n = (g / spacing).ceil() as usize;
-            for k in 1..n.min(1 << 20) {
-                let q = w[0] + (w[1] - w[0]) * (k as f64 / n as f64);
+            for m in 1..n.min(1 << 20) {
+                let q = w[0] + (w[1] - w[0]) * (m as f64 / n as f64);
                 let z = above(q);
                 if let Some((c, at)) = hf.drop_above(tool, q.x, q.y, z + floor, hint, &mut stack) {
                     hint = Some(at);
