@@ -716,7 +716,13 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
 fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: bool) -> f64 {
     use crate::sweep::{cells_between, Sweep};
     let sw = Sweep::new(a, b, *tool);
-    let ball = matches!(tool, Tool::Ball { .. }).then(|| BallSweep::new(a, b, sw.r));
+    let ball = matches!(tool, Tool::Ball { .. }).then(|| {
+        let mut bs = BallSweep::new(a, b, sw.r);
+        // a level move with its ends on the CL surface sweeps only its
+        // side (`Slab`), where the ball is lowest straight across
+        bs.side_only = ends_on_cl && a.z == b.z && bs.len > 1e-9;
+        bs
+    });
     let z = hf.samples();
     let p = hf.pitch;
     let r = tool.radius();
@@ -827,6 +833,8 @@ impl Slab {
 /// branch-free form the compiler vectorises: the exact check of a 2048 px
 /// raster sweeps ~40 million samples.
 struct BallSweep {
+    /// Only the side to sweep (a level move between CL points).
+    side_only: bool,
     d: DVec3,
     az: f64,
     r: f64,
@@ -842,6 +850,7 @@ impl BallSweep {
         let len = d.length();
         let u = if len > 0.0 { d / len } else { DVec3::ZERO };
         BallSweep {
+            side_only: false,
             d,
             az: a.z,
             r,
@@ -873,6 +882,9 @@ impl BallSweep {
 
     #[inline(always)]
     fn row_gouge_body(&self, row: &[f64], x0: f64, p: f64, wy: f64) -> f64 {
+        if self.side_only {
+            return self.side_gouge(row, x0, p, wy);
+        }
         let (d, r, r2, u) = (self.d, self.r, self.r2, self.u);
         let inf = f64::INFINITY;
         // the side exists only for a move that is not vertical
@@ -903,6 +915,30 @@ impl BallSweep {
                 inf
             };
             let g = zs - s0.min(s1).min(c);
+            let lane = &mut worst[k % 4];
+            *lane = if g > *lane { g } else { *lane };
+        }
+        worst[0].max(worst[1]).max(worst[2].max(worst[3]))
+    }
+
+    /// `row_gouge_body` for a level move's side: over a sample at w from
+    /// the move's line the ball is lowest at r - sqrt(r^2 - w^2) above
+    /// the tip, one square root instead of three.
+    #[inline(always)]
+    fn side_gouge(&self, row: &[f64], x0: f64, p: f64, wy: f64) -> f64 {
+        let (r, r2, u) = (self.r, self.r2, self.u);
+        let top = self.az + r;
+        let mut worst = [f64::NEG_INFINITY; 4];
+        for (k, &zs) in row.iter().enumerate() {
+            let wx = x0 + k as f64 * p;
+            let across = wx * u.y - wy * u.x;
+            let q = r2 - across * across;
+            let low = if q >= 0.0 {
+                top - q.sqrt()
+            } else {
+                f64::INFINITY
+            };
+            let g = zs - low;
             let lane = &mut worst[k % 4];
             *lane = if g > *lane { g } else { *lane };
         }
@@ -1118,9 +1154,17 @@ mod check_tests {
                 let (Some(za), Some(zb)) = (hf.drop(&tool, x, y), hf.drop(&tool, x2, y2)) else {
                     continue;
                 };
-                // ends on the CL surface, or one lifted by up to 0.1 mm
-                let lift = if rnd() < 0.5 { 0.0 } else { 0.1 * rnd() };
-                let (a, b) = (DVec3::new(x, y, za), DVec3::new(x2, y2, zb + lift));
+                // ends on the CL surface, or one lifted by up to 0.1 mm, or
+                // both level at the higher
+                let pick = rnd();
+                let (za, zb) = if pick < 0.3 {
+                    (za.max(zb), za.max(zb))
+                } else if pick < 0.65 {
+                    (za, zb + 0.1 * rnd())
+                } else {
+                    (za, zb)
+                };
+                let (a, b) = (DVec3::new(x, y, za), DVec3::new(x2, y2, zb));
                 let whole = sample_gouge(&hf, &tool, a, b, false);
                 let part = sample_gouge(&hf, &tool, a, b, true);
                 if whole > 0.0 {
