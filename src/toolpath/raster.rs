@@ -127,28 +127,14 @@ pub fn zigzag(
     tol: f64,
     arcs: bool,
 ) -> (Vec<DVec3>, Vec<DVec3>) {
-    let passes: Vec<Vec<DVec3>> = cl
+    let passes: Vec<(Vec<DVec3>, Vec<DVec3>)> = cl
         .par_iter()
         .enumerate()
-        .map(|(k, row)| {
-            if k % 2 == 1 {
-                let rev: Vec<DVec3> = row.iter().rev().copied().collect();
-                thin(&rev, tol, arcs)
-            } else {
-                thin(row, tol, arcs)
-            }
-        })
+        .map(|(k, row)| thinned(row, k % 2 == 1, tol, arcs))
         .collect();
     let mut out: Vec<DVec3> = Vec::new();
     let mut drops: Vec<DVec3> = Vec::with_capacity(cl.iter().map(Vec::len).sum());
-    for (k, (pass, row)) in passes.into_iter().zip(cl).enumerate() {
-        let row_drops = |drops: &mut Vec<DVec3>| {
-            if k % 2 == 1 {
-                drops.extend(row.iter().rev());
-            } else {
-                drops.extend_from_slice(row);
-            }
-        };
+    for (pass, row) in passes {
         if let (Some(&a), Some(&b)) = (out.last(), pass.first()) {
             let n = ((b - a).truncate().length() / hf.pitch).ceil().max(1.0) as usize;
             let link: Vec<(f64, f64)> = (0..=n)
@@ -164,11 +150,11 @@ pub fn zigzag(
             out.extend_from_slice(&l[1..]);
             out.extend_from_slice(&pass[1..]);
             drops.extend_from_slice(&dropped);
-            row_drops(&mut drops);
+            drops.extend(row);
             continue;
         }
         out.extend(pass);
-        row_drops(&mut drops);
+        drops.extend(row);
     }
     (out, drops)
 }
@@ -185,15 +171,19 @@ pub fn one_way(
     arcs: bool,
 ) -> Vec<(Vec<DVec3>, Vec<DVec3>)> {
     cl.par_iter()
-        .map(|row| {
-            let row: Vec<DVec3> = if climb {
-                row.iter().rev().copied().collect()
-            } else {
-                row.clone()
-            };
-            (thin(&row, tol, arcs), row)
-        })
+        .map(|row| thinned(row, climb, tol, arcs))
         .collect()
+}
+
+/// A row in the order its pass runs it (`reverse`d or not), thinned into
+/// moves, with its dropped points in that order.
+fn thinned(row: &[DVec3], reverse: bool, tol: f64, arcs: bool) -> (Vec<DVec3>, Vec<DVec3>) {
+    let row: Vec<DVec3> = if reverse {
+        row.iter().rev().copied().collect()
+    } else {
+        row.to_vec()
+    };
+    (thin(&row, tol, arcs), row)
 }
 
 #[cfg(test)]
