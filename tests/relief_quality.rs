@@ -421,13 +421,14 @@ fn steps_are_one_clean_step_per_outline() {
             "{model} at {res} px: {n} outline samples, {:.1}% with a step of 0.3 +- 0.06 mm, \
              {:.2}% with two steps within 3 samples; the steps part: median {:.3} mm two \
              samples either side, {:.3} mm three ({:.1}% within 0.06); the slopes part: \
-             median {:.3} mm",
+             median {:.3} mm; steps part within 0.06 two samples either side {:.1}%",
             100.0 * good,
             100.0 * stacked,
             median(&s2),
             median(&s3),
             100.0 * within(&s3),
-            median(&m2)
+            median(&m2),
+            100.0 * within(&s2)
         );
         assert!(
             (median(&s3) - step).abs() <= 0.005 && within(&s3) >= exact,
@@ -579,10 +580,20 @@ fn the_relief_reads_like_the_scene_at_100_to_2() {
     }
 }
 
-/// Largest absolute Laplacian of a relief outside a 2-sample band around
-/// outlines, over its 99th percentile.
-fn flare_ratio(h: &Grid<f32>, f: &Field) -> (f64, f64, f64) {
-    let mut lap = Vec::new();
+/// The largest of a measure over its 99th percentile, the largest and the
+/// percentile.
+fn over_p99(mut v: Vec<f64>) -> (f64, f64, f64) {
+    v.sort_by(f64::total_cmp);
+    let p99 = v[v.len() * 99 / 100];
+    let max = *v.last().unwrap();
+    (max / p99, max, p99)
+}
+
+/// Off a 2-sample band around outlines: the largest absolute Laplacian of
+/// a relief over its 99th percentile, and the same of its slope on the
+/// subject (a flare is a spike of slope where an outline ends).
+fn flare_ratio(h: &Grid<f32>, f: &Field) -> ((f64, f64, f64), (f64, f64, f64)) {
+    let (mut lap, mut slope) = (Vec::new(), Vec::new());
     for y in 3..h.h - 3 {
         for x in 3..h.w - 3 {
             let clear = (y - 2..=y + 2).all(|yy| (x - 2..=x + 2).all(|xx| !*f.barrier.get(xx, yy)));
@@ -590,13 +601,13 @@ fn flare_ratio(h: &Grid<f32>, f: &Field) -> (f64, f64, f64) {
                 let v = |x: usize, y: usize| *h.get(x, y) as f64;
                 let l = v(x + 1, y) + v(x - 1, y) + v(x, y + 1) + v(x, y - 1) - 4.0 * v(x, y);
                 lap.push(l.abs());
+                if *f.mask.get(x, y) {
+                    slope.push((v(x + 1, y) - v(x - 1, y)).hypot(v(x, y + 1) - v(x, y - 1)) / 2.0);
+                }
             }
         }
     }
-    lap.sort_by(f64::total_cmp);
-    let p99 = lap[lap.len() * 99 / 100];
-    let max = *lap.last().unwrap();
-    (max / p99, max, p99)
+    (over_p99(lap), over_p99(slope))
 }
 
 /// The fandisk's outlines that end inside a surface leave no flares: off
@@ -605,8 +616,11 @@ fn flare_ratio(h: &Grid<f32>, f: &Field) -> (f64, f64, f64) {
 /// nearly one plane (99th percentile 0), and its largest values lie on the
 /// crease that continues where the flap's outline ends (0.036 mm over 4
 /// samples at 256 px): real curvature. A flare itself is harmonic off its
-/// source, so this measure cannot see it; its shading still shows, and
-/// the weighted integration that would spread it is not done yet.
+/// source, so the Laplacian cannot see it; the slope can: on the front
+/// view its largest is 16.8x its 99th percentile (0.85 mm a sample, in a
+/// strip of the flap's steep side five samples wide between two outlines,
+/// where the outlines' zeroed jumps change fastest), on the right view
+/// 1.15x. Printed, not asserted: see README, known gaps.
 #[test]
 fn outline_ends_leave_no_flares() {
     for view in [View::Front, View::Right] {
@@ -615,8 +629,11 @@ fn outline_ends_leave_no_flares() {
             ..Camera::default()
         };
         let (h, f, _) = relief("fandisk.obj", cam, 256, &params(None));
-        let (ratio, max, p99) = flare_ratio(&h, &f);
-        eprintln!("fandisk {view:?}: largest |Laplacian| {max:.5} mm = {ratio:.2}x its 99th percentile {p99:.5} mm");
+        let ((ratio, max, p99), (sr, smax, sp99)) = flare_ratio(&h, &f);
+        eprintln!(
+            "fandisk {view:?}: largest |Laplacian| {max:.5} mm = {ratio:.2}x its 99th percentile \
+             {p99:.5} mm; largest slope {smax:.4} = {sr:.2}x its 99th percentile {sp99:.4}"
+        );
         if view == View::Right {
             assert!(
                 ratio <= 4.0,

@@ -749,7 +749,46 @@ fn the_finishing_tool_keeps_to_the_subject() {
     }
     eprintln!("finishing moves lie within {far:.2} mm of the subject\n{said}");
     assert!(far <= 3.175 + 2.0 * p, "{far}");
+    // and the job is shorter than finishing the whole panel: roughing cuts
+    // the background to its level, so nothing goes over it twice
+    let subject_s = estimated_s(&text);
+    let panel_job = d.join("panel.nc");
+    ok(&run(&[
+        "toolpath",
+        relief.to_str().unwrap(),
+        "--boundary",
+        "panel",
+        "-o",
+        panel_job.to_str().unwrap(),
+        "-q",
+    ]));
+    let panel_s = estimated_s(&std::fs::read_to_string(&panel_job).unwrap());
+    eprintln!("estimated {subject_s:.0} s on the subject, {panel_s:.0} s over the panel");
+    assert!(subject_s < panel_s, "{subject_s} s against {panel_s} s");
     std::fs::remove_dir_all(d).unwrap();
+}
+
+/// A job's estimated run time (s), from its header comment.
+fn estimated_s(job: &str) -> f64 {
+    let line = job
+        .lines()
+        .find(|l| l.starts_with("(estimated time: "))
+        .unwrap();
+    let t = line["(estimated time: ".len()..]
+        .split(" on ")
+        .next()
+        .unwrap();
+    t.split_whitespace()
+        .map(|part| {
+            let (v, unit) = part.split_at(part.len() - 1);
+            let v: f64 = v.parse().unwrap();
+            v * match unit {
+                "h" => 3600.0,
+                "m" => 60.0,
+                _ => 1.0,
+            }
+        })
+        .sum()
 }
 
 /// Acceptance 7 (at test size): the armadillo's raster+waterline job

@@ -1,7 +1,7 @@
 //! The subject's outline: where the relief stands off its background.
 //! `--boundary subject` finishes only there (plus a margin) with the
-//! finishing tool, and clears the background with the flat roughing tool
-//! at its own level: a ball spends no time on a flat field.
+//! finishing tool; roughing cuts the level background to its height (no
+//! stock left on it): a ball spends no time on a flat field.
 
 use crate::bail;
 use crate::error::Result;
@@ -74,11 +74,6 @@ impl Subject {
     /// Within the margin of the subject (panel mm).
     pub fn is_near(&self, x: f64, y: f64) -> bool {
         self.at(&self.near, x, y)
-    }
-
-    /// On the subject itself.
-    pub fn is_inside(&self, x: f64, y: f64) -> bool {
-        self.at(&self.inside, x, y)
     }
 
     /// Share of the panel within the margin of the subject.
@@ -175,7 +170,7 @@ mod tests {
         let s = Subject::find(&r, 3.0).unwrap();
         assert_eq!(s.level, 0.5);
         // sample (20, 20) is at x 20.5, y 19.5
-        assert!(s.is_inside(20.5, 19.5) && !s.is_inside(27.5, 19.5));
+        assert!(*s.inside.get(20, 20) && !*s.inside.get(27, 20));
         // grown by 3: radius 8 round the centre, not 9
         assert!(s.is_near(28.5, 19.5) && !s.is_near(29.5, 19.5));
         assert!(s.is_near(20.5, 11.5) && !s.is_near(26.5, 13.5));

@@ -509,6 +509,18 @@ impl ToolpathJob {
             if !(r.stock_to_leave.is_finite() && r.stock_to_leave >= 0.0) {
                 bail!("--stock-to-leave {}: must be 0 or more", r.stock_to_leave);
             }
+            // with --boundary subject, roughing cuts the level background to
+            // its height (the finishing tool keeps to the subject)
+            let lowered = subject.as_ref().map(|sub| {
+                let (z, zm) = (hf.samples(), hf_main.samples());
+                let bg = |i: usize, j: usize| !*sub.inside.get(i, j) && zm.get(i, j) == z.get(i, j);
+                let low = (0..z.h)
+                    .flat_map(|j| (0..z.w).map(move |i| (i, j)))
+                    .filter(|&(i, j)| bg(i, j))
+                    .map(|(i, j)| *z.get(i, j))
+                    .fold(f64::INFINITY, f64::min);
+                (rough::lower_background(hf_main, r.stock_to_leave, bg), low)
+            });
             let params = rough::Params {
                 tool: rt,
                 stepover: rstep,
@@ -517,11 +529,20 @@ impl ToolpathJob {
                 angle: self.angle,
                 region: panel,
                 material: None,
+                background: lowered.as_ref().map(|l| l.1).filter(|z| z.is_finite()),
             };
-            let passes = t.time("roughing", || rough::passes(hf_main, floor, &params))?;
+            let hf_rough = lowered.as_ref().map_or(hf_main, |l| &l.0);
+            let passes = t.time("roughing", || rough::passes(hf_rough, floor, &params))?;
             raw_points += passes.iter().map(|p| p.pts.len()).sum::<usize>();
             let passes = t.time("roughing check", || self.checked(hf_main, &rt, passes));
             let passes = t.time("stock", || planned.ramp_and_cut(passes, rt, false));
+            let background = match &subject {
+                Some(sub) => format!(
+                    ", the background cut to its level ({:.3} mm over the floor)",
+                    sub.level
+                ),
+                None => String::new(),
+            };
             ops.push(Op {
                 title: "roughing",
                 tool: rt,
@@ -529,36 +550,11 @@ impl ToolpathJob {
                 settings: settings.clone(),
                 strategy: format!(
                     "roughing, layers {step_down:.3} mm, stepover {rstep:.3} mm, \
-                     stock to leave {} mm",
+                     stock to leave {} mm{background}",
                     r.stock_to_leave
                 ),
                 passes,
             });
-            // the background at its own level, by the roughing tool
-            if let Some(sub) = &subject {
-                let off = |x: f64, y: f64| !sub.is_inside(x, y) && off_pad(x, y);
-                let (bg, _) = t.time("background", || {
-                    self.raster(hf_main, &rt, panel, floor, rstep, Some(&off))
-                });
-                let safe = settings.safe_z;
-                let bg = bg
-                    .into_iter()
-                    .map(|pts| Pass { pts, clear_z: safe })
-                    .collect();
-                let passes = planned.ramp_and_cut(bg, rt, true);
-                ops.push(Op {
-                    title: "roughing",
-                    tool: rt,
-                    zero: String::new(),
-                    settings,
-                    strategy: format!(
-                        "the background at its level ({:.3} mm over the floor), raster, \
-                         stepover {rstep:.3} mm",
-                        sub.level
-                    ),
-                    passes,
-                });
-            }
         }
         // the finishing tool in layers wherever more is left than it may
         // cut at once: what roughing could not reach, or all of a relief
@@ -1249,6 +1245,7 @@ impl ToolpathJob {
             angle: self.angle,
             region,
             material: Some(&material),
+            background: None,
         };
         let passes = rough::passes(hf, floor, &params).ok()?;
         let passes: Vec<Pass> = self

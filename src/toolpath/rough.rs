@@ -33,6 +33,38 @@ pub struct Params<'a> {
     /// earlier operations have cut the stock; `None`: untouched stock.
     /// Rows are cut at a layer only where material lies above it.
     pub material: Option<&'a (dyn Fn(f64, f64) -> f64 + Sync)>,
+    /// A level background's Z that roughing cuts to its final height (no
+    /// stock left on it), with `hf` holding the background's samples
+    /// lowered by `stock_to_leave` (`lower_background`): `None`, stock is
+    /// left everywhere.
+    pub background: Option<f64>,
+}
+
+/// `hf`'s samples with those where `background` holds (and the pad's
+/// are not) lowered by `stl`: dropping the enlarged tool on them and
+/// adding `stl` back then gives, over a level background, the enlarged
+/// tool's own height on the real surface (it cuts the background to its
+/// level), and next to the subject the subject's samples still hold it
+/// `stl` off. Every real point under the real tool is one of these
+/// samples or between them, so the real tool touches nothing.
+pub fn lower_background(
+    hf: &HeightField,
+    stl: f64,
+    background: impl Fn(usize, usize) -> bool + Sync,
+) -> HeightField {
+    let z = hf.samples();
+    let mut low = z.clone();
+    low.data
+        .par_chunks_mut(z.w)
+        .enumerate()
+        .for_each(|(j, row)| {
+            for (i, v) in row.iter_mut().enumerate() {
+                if background(i, j) {
+                    *v -= stl;
+                }
+            }
+        });
+    HeightField::new(low, hf.pitch)
 }
 
 /// The roughing passes over `p.region` of a relief whose background is
@@ -48,7 +80,7 @@ pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
             t.spec()
         ),
     };
-    let bottom = floor + stl;
+    let bottom = p.background.unwrap_or(floor + stl);
     if bottom >= 0.0 {
         bail!(
             "--stock-to-leave {stl}: leaves nothing to rough in a relief {:.3} mm deep",
@@ -176,5 +208,60 @@ mod tests {
             );
         }
         assert!(r[..k].iter().all(|q| q.z >= -2.0));
+    }
+
+    /// A dome on a level field, roughed with the background cut to its
+    /// level: the last layer runs on the level away from the dome, nothing
+    /// goes below the real tool's CL surface, and next to the dome the
+    /// tool keeps the stock to leave off it.
+    #[test]
+    fn a_level_background_is_cut_to_its_height() {
+        use crate::grid::Grid;
+        let (n, pitch, level) = (60, 0.5, -3.0);
+        let mut z = Grid::new(n, n, level);
+        for j in 0..n {
+            for i in 0..n {
+                let r2 = (i as f64 - 30.0).powi(2) + (j as f64 - 30.0).powi(2);
+                if r2 < 100.0 {
+                    z.set(i, j, level + 0.02 * (100.0 - r2));
+                }
+            }
+        }
+        let dome = z.map(|v| *v > level);
+        let hf = HeightField::new(z, pitch);
+        let (tool, stl) = (Tool::Flat { d: 3.0 }, 0.3);
+        let low = lower_background(&hf, stl, |i, j| !*dome.get(i, j));
+        let p = Params {
+            tool,
+            stepover: 1.2,
+            step_down: 1.0,
+            stock_to_leave: stl,
+            angle: 0.0,
+            region: [0.0, 0.0, 30.0, 30.0],
+            material: None,
+            background: Some(level),
+        };
+        let passes = passes(&low, level, &p).unwrap();
+        // the dome alone, its field sunk far below
+        let only = HeightField::new(
+            hf.samples()
+                .map(|v| if *v > level { *v } else { level - 100.0 }),
+            pitch,
+        );
+        let big = Tool::Flat { d: 3.0 + 2.0 * stl };
+        let (mut on_level, mut near_dome) = (0, 0);
+        for q in passes.iter().flat_map(|p| &p.pts) {
+            let real = hf.drop(&tool, q.x, q.y).unwrap_or(level);
+            assert!(q.z >= real - 1e-9, "{q:?} below the CL surface {real}");
+            let offset = only.drop(&big, q.x, q.y).unwrap_or(f64::MIN);
+            if offset > level {
+                // the enlarged tool meets the dome: stock is left on it
+                assert!(q.z >= offset + stl - 1e-9, "{q:?}");
+                near_dome += 1;
+            } else if q.z == level {
+                on_level += 1;
+            }
+        }
+        assert!(on_level > 100 && near_dome > 10, "{on_level} {near_dome}");
     }
 }
