@@ -1,0 +1,469 @@
+//! A job's planned ops delivered: emitted as G-code (one file with M0
+//! tool changes, a split job, or one file per tile), judged by the
+//! simulator (depth of cut, plunges, residual, travel), headed with the
+//! notes and estimated times that judging settles, and written.
+
+use super::{
+    judge, layout, sim, stock, tile, view, CamSummary, Finish, JobFile, Limits, Op, Origin,
+    ToolpathJob, Units, ZZero,
+};
+use crate::bail;
+use crate::error::Result;
+use crate::gcode::emit::Emitter;
+use crate::machine::Machine;
+use crate::output::Outputs;
+use crate::relief::Relief;
+use crate::timing::Timings;
+use crate::tool::Tool;
+use crate::toolpath::Pass;
+use glam::DVec3;
+use std::path::PathBuf;
+
+/// What planning made besides the ops, for delivering them.
+pub(super) struct Made<'a> {
+    pub relief: &'a Relief,
+    pub plan: &'a layout::Plan,
+    pub m: &'a Machine,
+    /// The finishing tool.
+    pub tool: Tool,
+    /// The stock cells' size (mm).
+    pub cell: f64,
+    /// The touch-off pad: centre and side (mm).
+    pub pad: Option<(f64, f64, f64)>,
+    pub limits: &'a Limits,
+    pub raw_points: usize,
+    /// The finishing stepover (mm).
+    pub step: f64,
+    /// Where a split job's roughing goes.
+    pub rough_out: PathBuf,
+}
+
+impl ToolpathJob {
+    /// Emit, judge, head and write the ops (see the module doc).
+    pub(super) fn deliver(
+        &self,
+        mut ops: Vec<Op>,
+        made: Made<'_>,
+        mut notes: Vec<String>,
+        mut t: Timings,
+    ) -> Result<CamSummary> {
+        let Made {
+            relief,
+            plan,
+            m,
+            tool,
+            cell,
+            pad,
+            limits,
+            raw_points,
+            step,
+            rough_out,
+        } = made;
+        // emit: one file, tool changes with M0, or one file per tool
+        let shift = plan.shift;
+        let z_shift = match self.z_zero {
+            ZZero::Top => 0.0,
+            ZZero::Bottom => plan.stock.2,
+        };
+        let zero = match (self.z_zero, pad) {
+            (ZZero::Bottom, _) => "set Z0 on the spoilboard (the stock's bottom)".to_string(),
+            (ZZero::Top, Some(p)) => format!(
+                "set Z0 on the pad's top at X{:.1} Y{:.1} (the stock top)",
+                p.0 + shift.x,
+                p.1 + shift.y
+            ),
+            (ZZero::Top, None) => "set Z0 on the stock top again".to_string(),
+        };
+        for op in &mut ops {
+            op.zero = match (self.z_zero, op.title) {
+                (ZZero::Top, "cutout") => "set Z0 on the stock top beside the panel".into(),
+                _ => zero.clone(),
+            };
+        }
+        let n_rough = ops.iter().take_while(|o| o.title == "roughing").count();
+        let mut header_notes = notes.clone();
+        if let Some(p) = pad {
+            header_notes.push(format!(
+                "touch-off pad: {:.0} mm square at X{:.1} Y{:.1}, left at the stock top by roughing, cut last",
+                p.2,
+                p.0 + shift.x,
+                p.1 + shift.y
+            ));
+        }
+        // the files: one job, a split job, or one job per tile; each with
+        // its own frame and header notes
+        let files: Vec<JobFile> = match self.layout.tile {
+            Some(size) => t.time("tiles", || {
+                self.tiled(
+                    ops,
+                    relief,
+                    plan,
+                    size,
+                    (&tool, cell),
+                    &header_notes,
+                    z_shift,
+                )
+            })?,
+            None if self.split && n_rough > 0 => {
+                let rest = ops.split_off(n_rough);
+                vec![
+                    (rough_out, ops, plan.clone(), header_notes.clone()),
+                    (
+                        self.output.clone(),
+                        rest,
+                        plan.clone(),
+                        header_notes.clone(),
+                    ),
+                ]
+            }
+            None => vec![(self.output.clone(), ops, plan.clone(), header_notes.clone())],
+        };
+        let mut texts = Vec::new();
+        for (file, group, fplan, fnotes) in &files {
+            let text = t.time("g-code", || {
+                self.emit(group, relief, fplan, m, z_shift, fnotes)
+            });
+            texts.push((file.clone(), text));
+        }
+        // the simulator judges the job: depth of cut, plunges, residual;
+        // every file placed in the one job's frame
+        let progs: Vec<crate::gcode::Program> = texts
+            .iter()
+            .map(|(_, text)| crate::gcode::program(text))
+            .collect::<Result<_>>()?;
+        for ((file, _), prog) in texts.iter().zip(&progs) {
+            judge::fits_travel(prog, m, file)?;
+        }
+        let progs: Vec<crate::gcode::Program> = progs
+            .iter()
+            .zip(&files)
+            .map(|(p, f)| p.moved(plan.shift - f.2.shift))
+            .collect();
+        let mut judged = t.time("judge", || judge::run(&progs, relief, plan, z_shift, cell))?;
+        let groups = &files;
+        if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.of(tl)) {
+            let what = format!(
+                "{}line {}: {} cuts {:.3} mm deep{} (allowed {:.3} mm in {})",
+                if groups.len() > 1 {
+                    format!("{}, ", groups[k].0.display())
+                } else {
+                    String::new()
+                },
+                o.line,
+                o.tool.spec(),
+                o.depth,
+                if o.slotting { " at full width" } else { "" },
+                o.limit,
+                limits.name
+            );
+            bail!("{what}: rough first (--rough), lower --step-down, or pass --allow-deep-cuts");
+        }
+        if self.finish == Finish::Waterline {
+            notes.push(format!(
+                "waterline alone leaves up to {:.3} mm (mean {:.3} mm) on gentle slopes, \
+                 where its loops lie far apart; raster+waterline finishes them",
+                judged.residual.0, judged.residual.1
+            ));
+        }
+        // what goes into each file's header now that it is judged: the
+        // notes not yet there and its time; the lines reported move on by
+        // as many lines as that takes
+        let mut extra: Vec<String> = notes
+            .iter()
+            .filter(|n| !header_notes.contains(n))
+            .cloned()
+            .collect();
+        let times: Vec<f64> = progs.iter().map(|p| sim::estimate_time(p, m)).collect();
+        let estimate = |secs: f64| format!("estimated time: {} on {}", sim::hms(secs), m.name);
+        let added =
+            |extra: &[String], secs: f64| comment_lines(extra) + comment_lines(&[estimate(secs)]);
+        if self.allow_deep_cuts {
+            if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.material_of(tl)) {
+                let note = |by: usize| {
+                    format!(
+                        "--allow-deep-cuts: line {} cuts {:.3} mm deep with {} (limit {:.3} mm)",
+                        o.line + by,
+                        o.depth,
+                        o.tool.spec(),
+                        o.limit
+                    )
+                };
+                // the note's own lines count: settle the number twice
+                let mut by = added(&extra, times[k]);
+                for _ in 0..2 {
+                    let with: Vec<String> = extra.iter().cloned().chain([note(by)]).collect();
+                    by = added(&with, times[k]);
+                }
+                notes.push(note(by));
+                extra.push(note(by));
+            }
+        }
+        judged.engagement.shift_lines(added(&extra, times[0]));
+        let mut out = Outputs::default();
+        let (mut lines, mut time_s) = (0, 0.0);
+        let mut written = Vec::new();
+        for ((file, text), secs) in texts.into_iter().zip(times) {
+            time_s += secs;
+            let mut text = with_comments(text, &extra);
+            text = with_comments(text, &[estimate(secs)]);
+            // counted as written: a wrapped comment takes several lines
+            lines += text.lines().count();
+            out.add(&file, text.into_bytes());
+            written.push(file);
+        }
+        // the job comes first in the list
+        written.rotate_right(1);
+        if let Some(svg) = &self.svg {
+            let doc = t.time("svg", || view::top_view(&progs, relief, plan, z_shift));
+            out.add(svg, doc.into_bytes());
+            written.push(svg.clone());
+        }
+        if let Some(pv) = &self.preview {
+            let png = t.time("preview", || {
+                view::simulated_preview(&judged, relief, self.light)
+            });
+            out.add(pv, png?);
+            written.push(pv.clone());
+        }
+        t.time("write", || out.commit())?;
+        let (rapid_mm, cut_mm) = judge::travel(&progs);
+        Ok(CamSummary {
+            lines,
+            raw_points,
+            time_s,
+            stepover_mm: step,
+            written,
+            notes,
+            engagement: judged.engagement,
+            residual: judged.residual,
+            gouge: judged.gouge,
+            rapid_mm,
+            cut_mm,
+            timings: t,
+        })
+    }
+
+    /// The job's ops cut into tiles of at most `size` (row by row from the
+    /// lower-left), one file each: every pass clipped to its tile (the
+    /// clearing ops to the tile grown by the finishing tool's radius and
+    /// a little, so that finishing along a border meets cleared stock),
+    /// ramped in again where it now starts in material, travelling at
+    /// safe Z; X0 Y0 at the tile's lower-left corner.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn tiled(
+        &self,
+        ops: Vec<Op>,
+        relief: &Relief,
+        plan: &layout::Plan,
+        (tw, th): (f64, f64),
+        (finish, cell): (&Tool, f64),
+        notes: &[String],
+        z_shift: f64,
+    ) -> Result<Vec<JobFile>> {
+        if !(tw.is_finite() && th.is_finite() && tw > 0.0 && th > 0.0) {
+            bail!("--tile {tw}x{th}: sizes must be positive");
+        }
+        if self.cutout.is_some() {
+            bail!("--tile with --cutout: cut the tiles out one by one is not supported; leave out --cutout");
+        }
+        if self.split {
+            bail!(
+                "--tile with --split: every tile is a file of its own already; leave out --split"
+            );
+        }
+        if self.z_zero == ZZero::Top && ops.iter().any(|o| o.tool != ops[0].tool) {
+            bail!(
+                "--tile: the job changes tools, and the stock top does not survive roughing in \
+                 every tile; zero Z on the spoilboard: --z-zero bottom --stock WxHxT"
+            );
+        }
+        let (pw, ph) = (relief.width_mm, relief.height_mm);
+        let tiles = tile::grid(pw, ph, tw, th);
+        let grow = finish.radius() + 0.5;
+        let mut planned = stock::Planned::new(plan.stock_in_panel(cell, ph));
+        let stem = self
+            .output
+            .file_stem()
+            .map_or("job".into(), |s| s.to_string_lossy().to_string());
+        let (nx, ny) = tiles.last().map_or((1, 1), |t| t.1);
+        let mut out = Vec::new();
+        let mut prev: Option<[f64; 4]> = None;
+        for (rect, (c, r)) in &tiles {
+            let mut tile_ops = Vec::new();
+            for op in &ops {
+                let g = if op.title == "finishing" { 0.0 } else { grow };
+                let around = [rect[0] - g, rect[1] - g, rect[2] + g, rect[3] + g];
+                let safe = op.settings.safe_z;
+                let pieces: Vec<Pass> = op
+                    .passes
+                    .iter()
+                    .flat_map(|p| tile::clip(&p.pts, around))
+                    .map(|pts| Pass { pts, clear_z: safe })
+                    .collect();
+                let passes = planned.ramp_and_cut(pieces, op.tool, true);
+                if !passes.is_empty() {
+                    tile_ops.push(Op {
+                        passes,
+                        ..op.clone()
+                    });
+                }
+            }
+            if tile_ops.is_empty() {
+                continue;
+            }
+            let tplan = layout::Plan {
+                shift: DVec3::new(-rect[0], -rect[1], 0.0),
+                ..plan.clone()
+            };
+            let (sx, sy) = (rect[0] + plan.panel_at.0, rect[1] + plan.panel_at.1);
+            let mut n = notes.to_vec();
+            n.push(format!(
+                "tile {c},{r} of {nx} x {ny}: panel X{:.2}..{:.2} Y{:.2}..{:.2}; X0 Y0 at its \
+                 lower-left corner, X{sx:.2} Y{sy:.2} from the stock's lower-left corner{}",
+                rect[0],
+                rect[2],
+                rect[1],
+                rect[3],
+                match prev {
+                    Some(p) => format!(
+                        "; from the last tile, move the stock by X{:.2} Y{:.2} (or zero X and Y there)",
+                        -(rect[0] - p[0]),
+                        -(rect[1] - p[1])
+                    ),
+                    None => String::new(),
+                }
+            ));
+            if z_shift > 0.0 {
+                n.push("Z0 stays on the spoilboard from tile to tile".into());
+            }
+            prev = Some(*rect);
+            let file = self.output.with_file_name(format!("{stem}-tile{c}-{r}.nc"));
+            out.push((file, tile_ops, tplan, n));
+        }
+        Ok(out)
+    }
+
+    /// One G-code file for `ops`, tool changes between them.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn emit(
+        &self,
+        ops: &[Op],
+        relief: &Relief,
+        plan: &layout::Plan,
+        m: &Machine,
+        z_shift: f64,
+        notes: &[String],
+    ) -> String {
+        let header = |op: &Op| {
+            vec![
+                format!(
+                    "tool: {} (radius {} mm) for {}",
+                    op.tool.spec(),
+                    op.tool.radius(),
+                    op.title
+                ),
+                format!("strategy: {}", op.strategy),
+                format!(
+                    "feed {} plunge {} mm/min, {} rpm, safe Z {}",
+                    op.settings.feed, op.settings.plunge_feed, op.settings.rpm, op.settings.safe_z
+                ),
+            ]
+        };
+        let (sw, sh, st) = plan.stock;
+        let mut top = vec![
+            "relievo GRBL 1.1 job".to_string(),
+            format!("relief: {}", self.relief_name),
+            format!(
+                "material: {}",
+                self.material.as_deref().unwrap_or("not given")
+            ),
+            format!(
+                "panel: {:.2} x {:.2} mm, relief depth {:.3} mm{}",
+                relief.width_mm,
+                relief.height_mm,
+                relief.depth_mm,
+                if self.layout.rotate {
+                    ", turned 90 deg"
+                } else {
+                    ""
+                }
+            ),
+            format!(
+                "stock: {sw:.2} x {sh:.2} x {st:.2} mm, origin at its {}",
+                if self.origin == Origin::Center {
+                    "centre"
+                } else {
+                    "lower-left corner"
+                }
+            ),
+            match self.z_zero {
+                ZZero::Top => "Z0 = stock top".to_string(),
+                ZZero::Bottom => format!("Z0 = stock bottom (spoilboard), stock top at Z{st}"),
+            },
+            // machine-readable: the simulator places the relief by it
+            plan.frame(z_shift).comment(),
+            format!(
+                "machine: {}, units: {}",
+                m.name,
+                if self.units == Units::In {
+                    "inch (G20)"
+                } else {
+                    "mm"
+                }
+            ),
+        ];
+        top.extend(notes.iter().cloned());
+        top.extend(header(&ops[0]));
+        let inch = self.units == Units::In;
+        let mut e = Emitter::new(&top, &ops[0].settings, inch, z_shift);
+        e.arcs = self.arcs;
+        e.steps = Some(DVec3::new(
+            m.steps_per_mm.x,
+            m.steps_per_mm.y,
+            m.steps_per_mm.z,
+        ));
+        let shift = plan.shift;
+        for (k, op) in ops.iter().enumerate() {
+            if k > 0 && op.tool != ops[k - 1].tool {
+                e.tool_change(&header(op), &op.settings, &op.zero);
+            } else if k > 0 {
+                for h in header(op).iter().skip(1) {
+                    crate::gcode::emit::comment(&mut e.out, h);
+                }
+            }
+            for pass in &op.passes {
+                let pts: Vec<DVec3> = pass
+                    .pts
+                    .iter()
+                    .map(|p| DVec3::new(p.x + shift.x, p.y + shift.y, p.z))
+                    .collect();
+                e.pass(&pts, &op.settings, pass.clear_z);
+            }
+        }
+        e.finish(&ops[ops.len() - 1].settings)
+    }
+}
+
+/// How many lines `with_comments` adds for `notes`.
+fn comment_lines(notes: &[String]) -> usize {
+    let mut s = String::new();
+    for n in notes {
+        crate::gcode::emit::comment(&mut s, n);
+    }
+    s.lines().count()
+}
+
+/// Insert comment lines after the header comments.
+fn with_comments(mut text: String, lines: &[String]) -> String {
+    let mut add = String::new();
+    for l in lines {
+        crate::gcode::emit::comment(&mut add, l);
+    }
+    let at = text
+        .lines()
+        .take_while(|l| l.starts_with('('))
+        .map(|l| l.len() + 1)
+        .sum();
+    text.insert_str(at, &add);
+    text
+}
