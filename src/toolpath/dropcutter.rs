@@ -439,6 +439,156 @@ impl HeightField {
         (contact.0 != usize::MAX && best.is_finite()).then_some((best, contact))
     }
 
+    /// A ball of radius `r` moved straight from tip a to tip b: the
+    /// highest the exact CL surface rises over the move (how deep the move
+    /// would cut), if more than `floor`, else None. Branch and bound as
+    /// for a drop, a block bounded by its highest corner less the ball's
+    /// lowest over the block's nearest point to the move's path, and less
+    /// the path's lower end; every cell that may beat the best found gets
+    /// its features' exact rises (`along`).
+    pub fn rise_along(&self, r: f64, a: glam::DVec3, b: glam::DVec3, floor: f64) -> Option<f64> {
+        let path = super::along::Path { a, d: b - a };
+        let below = |d2: f64| d2 / (2.0 * r);
+        let p = self.pitch;
+        let (dx, dy) = (b.x - a.x, b.y - a.y);
+        let len2 = dx * dx + dy * dy;
+        let reach_t = if len2 > 0.0 { r / len2.sqrt() } else { 0.0 };
+        // for the rectangle of block (bx, by) at `level` (unclamped, as
+        // `block_distance`): the squared distance from the move's path
+        // (XY), and the move's lowest tip where the ball can reach it
+        let near = |level: usize, bx: usize, by: usize| {
+            let s = (1usize << level) as f64 * p;
+            let x0 = bx as f64 * s - 0.5 * p;
+            let y1 = self.top + 0.5 * p - by as f64 * s;
+            let d2 = segment_rect_d2((a.x, a.y), (b.x, b.y), (x0, y1 - s, x0 + s, y1));
+            let low = if len2 > 0.0 {
+                let t = |x: f64, y: f64| ((x - a.x) * dx + (y - a.y) * dy) / len2;
+                let ts = [t(x0, y1 - s), t(x0 + s, y1 - s), t(x0, y1), t(x0 + s, y1)];
+                let lo = ts.iter().cloned().fold(f64::INFINITY, f64::min) - reach_t;
+                let hi = ts.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + reach_t;
+                let z = |t: f64| a.z + (b.z - a.z) * t.clamp(0.0, 1.0);
+                z(lo).min(z(hi))
+            } else {
+                a.z.min(b.z)
+            };
+            (d2, low)
+        };
+        let mut best = floor;
+        let reach = (2.0 * r / p).max(1.0);
+        let start = (reach.log2().ceil() as usize).min(self.levels.len() - 1);
+        let base = &self.levels[start];
+        let l = &self.lattice;
+        let (xl, xh) = (a.x.min(b.x) - r, a.x.max(b.x) + r);
+        let (yl, yh) = (a.y.min(b.y) - r, a.y.max(b.y) + r);
+        let (i0, i1) = (l.cell_x(xl) >> start, l.cell_x(xh) >> start);
+        let (j0, j1) = (l.cell_y(yh) >> start, l.cell_y(yl) >> start);
+        let mut stack: Vec<(f64, usize, usize, usize)> = Vec::new();
+        for by in j0..=j1.min(base.h - 1) {
+            for bx in i0..=i1.min(base.w - 1) {
+                let (d2, low) = near(start, bx, by);
+                if d2 <= r * r {
+                    stack.push((base.get(bx, by) - below(d2) - low, start, bx, by));
+                }
+            }
+        }
+        stack.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        while let Some((bound, level, bx, by)) = stack.pop() {
+            if bound <= best {
+                continue;
+            }
+            if level == 0 {
+                let (d2, low) = near(0, bx, by);
+                let high = *self.levels[0].get(bx, by);
+                best = best.max(self.cell_rise(&path, r, bx, by, (d2, low, high), best));
+                continue;
+            }
+            let child = &self.levels[level - 1];
+            let mut kids = [(0.0f64, 0usize, 0usize, 0usize); 4];
+            let mut nk = 0;
+            for (cx, cy) in [
+                (2 * bx, 2 * by),
+                (2 * bx + 1, 2 * by),
+                (2 * bx, 2 * by + 1),
+                (2 * bx + 1, 2 * by + 1),
+            ] {
+                if cx >= child.w || cy >= child.h {
+                    continue;
+                }
+                let (d2, low) = near(level - 1, cx, cy);
+                if d2 > r * r {
+                    continue;
+                }
+                let k = child.data[cy * child.w + cx] - below(d2) - low;
+                if k > best {
+                    kids[nk] = (k, level - 1, cx, cy);
+                    nk += 1;
+                }
+            }
+            kids[..nk].sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            stack.extend_from_slice(&kids[..nk]);
+        }
+        (best > floor).then_some(best)
+    }
+
+    /// The highest rise over `path` of a ball held by cell (i, j): its
+    /// four vertices, then, unless they settle that the cell cannot beat
+    /// `best`, its five edges and two facets. `(d2, low, high)`: the
+    /// cell's squared distance from the path, the path's lowest tip in
+    /// reach of it, and its highest corner.
+    ///
+    /// While every corner lies within F = R / 2 of the axis, a triangle
+    /// holds the ball at most the Jensen gap of its profile, curvature
+    /// R^2 / (R^2 - F^2)^1.5 times diameter^2 / 8, above its best corner;
+    /// while one lies farther, the whole cell lies at least F - diameter
+    /// from the axis, where the ball is that much higher.
+    fn cell_rise(
+        &self,
+        path: &super::along::Path,
+        r: f64,
+        i: usize,
+        j: usize,
+        (d2, low, high): (f64, f64, f64),
+        best: f64,
+    ) -> f64 {
+        let l = &self.lattice;
+        let (x0, x1, yt, yb) = (l.vx(i), l.vx(i + 1), l.vy(j), l.vy(j + 1));
+        let w = self.vz.w;
+        let k = j * w + i;
+        let (za, zb) = (self.vz.data[k], self.vz.data[k + 1]);
+        let (zc, zd) = (self.vz.data[k + w], self.vz.data[k + w + 1]);
+        let (a, b, c, d) = ([x0, yt, za], [x1, yt, zb], [x0, yb, zc], [x1, yb, zd]);
+        let (cw, ch) = (x1 - x0, yt - yb);
+        let corners = [a, b, c, d]
+            .iter()
+            .map(|v| path.vertex(r, *v))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let diam2 = cw * cw + ch * ch;
+        let f = 0.5 * r;
+        let gap = r * r / (r * r - f * f).powf(1.5) * diam2 / 8.0;
+        let rim = (f - diam2.sqrt()).max(d2.sqrt()).min(r);
+        let rim_bound = high - (r - (r * r - rim * rim).sqrt()) - low;
+        if (corners + gap).max(rim_bound) <= best {
+            return corners;
+        }
+        let mut best = corners;
+        for (p, q) in [(a, b), (a, c), (b, c), (b, d), (c, d)] {
+            best = best.max(path.edge(r, p, q));
+        }
+        if cw > 0.0 && ch > 0.0 {
+            let uv = |x: f64, y: f64| ((x - x0) / cw, (yt - y) / ch);
+            let upper = path.facet(r, a, ((zb - za) / cw, (za - zc) / ch), |x, y| {
+                let (u, v) = uv(x, y);
+                [u, v, 1.0 - u - v]
+            });
+            let lower = path.facet(r, d, ((zd - zc) / cw, (zb - zd) / ch), |x, y| {
+                let (u, v) = uv(x, y);
+                [1.0 - u, 1.0 - v, u + v - 1.0]
+            });
+            best = best.max(upper).max(lower);
+        }
+        best
+    }
+
     /// Every cell in turn, no pruning (checks the branch and bound).
     pub fn drop_brute(&self, tool: &Tool, x: f64, y: f64) -> Option<f64> {
         let (cw, ch) = self.lattice.cells();
@@ -449,6 +599,63 @@ impl HeightField {
             .fold(f64::NEG_INFINITY, f64::max);
         best.is_finite().then_some(best)
     }
+}
+
+/// Squared distance from the segment a -> b to the rectangle (x0, y0,
+/// x1, y1): 0 where they meet, else the least over the segment's ends and
+/// the rectangle's corners.
+fn segment_rect_d2(a: (f64, f64), b: (f64, f64), (x0, y0, x1, y1): (f64, f64, f64, f64)) -> f64 {
+    // the segment clipped to the rectangle (Liang-Barsky)
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let (mut lo, mut hi) = (0.0f64, 1.0f64);
+    let mut meets = true;
+    for (p, q) in [
+        (-dx, a.0 - x0),
+        (dx, x1 - a.0),
+        (-dy, a.1 - y0),
+        (dy, y1 - a.1),
+    ] {
+        if p == 0.0 {
+            if q < 0.0 {
+                meets = false;
+            }
+        } else {
+            let t = q / p;
+            if p < 0.0 {
+                lo = lo.max(t);
+            } else {
+                hi = hi.min(t);
+            }
+        }
+    }
+    if meets && lo <= hi {
+        return 0.0;
+    }
+    let to_rect = |x: f64, y: f64| {
+        let ex = (x0 - x).max(0.0).max(x - x1);
+        let ey = (y0 - y).max(0.0).max(y - y1);
+        ex * ex + ey * ey
+    };
+    let len2 = dx * dx + dy * dy;
+    let to_segment = |x: f64, y: f64| {
+        let t = if len2 > 0.0 {
+            (((x - a.0) * dx + (y - a.1) * dy) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let (ex, ey) = (a.0 + t * dx - x, a.1 + t * dy - y);
+        ex * ex + ey * ey
+    };
+    [
+        to_rect(a.0, a.1),
+        to_rect(b.0, b.1),
+        to_segment(x0, y0),
+        to_segment(x1, y0),
+        to_segment(x0, y1),
+        to_segment(x1, y1),
+    ]
+    .into_iter()
+    .fold(f64::INFINITY, f64::min)
 }
 
 /// The highest contact of the tool at (x, y) with the edge a -> b, within
@@ -697,6 +904,56 @@ mod tests {
         for k in 0..200 {
             let (x, y) = (2.0 + k as f64 * 0.0731, 7.3);
             assert_eq!(hf.drop(&tool, x, y), Some(-1.0), "at x {x}");
+        }
+    }
+
+    /// The rise along a move against the drop-cutter itself: dense drops
+    /// along the move, and a golden-section search round the highest
+    /// (the highest of concave pieces lies inside one of them): the
+    /// exact rise is never below it and at most 1e-7 mm above, for level,
+    /// rising and falling moves over waves, noise and a one-sample step,
+    /// including moves clear of the surface and ones cutting deep.
+    #[test]
+    fn the_rise_along_a_move_matches_dense_drops() {
+        for (seed, rough) in [(3, false), (8, true)] {
+            let hf = field(60, 48, 0.25, seed, rough);
+            let mut rnd = rng(seed + 100);
+            for (r, n) in [(1.5875, 60), (0.5, 60)] {
+                let tool = Tool::Ball { d: 2.0 * r };
+                for _ in 0..n {
+                    let (x, y) = (2.5 + 10.0 * rnd(), 2.5 + 7.0 * rnd());
+                    let (len, ang) = (0.05 + 2.0 * rnd(), std::f64::consts::TAU * rnd());
+                    let (bx, by) = (x + len * ang.cos(), y + len * ang.sin());
+                    let za = hf.drop(&tool, x, y).unwrap() + 0.3 * (rnd() - 0.6);
+                    let zb = match (rnd() * 3.0) as usize {
+                        0 => za,
+                        _ => hf.drop(&tool, bx, by).unwrap() + 0.3 * (rnd() - 0.6),
+                    };
+                    let (a, b) = (glam::DVec3::new(x, y, za), glam::DVec3::new(bx, by, zb));
+                    let rise = |t: f64| {
+                        let q = a + (b - a) * t;
+                        hf.drop(&tool, q.x, q.y).unwrap_or(f64::NEG_INFINITY) - q.z
+                    };
+                    let m = 2000;
+                    let (k, top) = (0..=m)
+                        .map(|k| (k, rise(k as f64 / m as f64)))
+                        .fold((0, f64::NEG_INFINITY), |b, p| if p.1 > b.1 { p } else { b });
+                    let lo = (k.max(1) - 1) as f64 / m as f64;
+                    let hi = ((k + 1).min(m)) as f64 / m as f64;
+                    let reference = top.max(golden(lo, hi, rise).1);
+                    let exact = hf
+                        .rise_along(r, a, b, f64::NEG_INFINITY)
+                        .unwrap_or_else(|| panic!("none: r {r} {a} -> {b}, dense {reference}"));
+                    assert!(
+                        exact >= reference - 1e-9 && exact <= reference + 1e-7,
+                        "r {r}, {a} -> {b}: exact {exact}, dense {reference}"
+                    );
+                    // with a floor: None exactly when it is not passed
+                    let floor = reference - 1e-3;
+                    assert_eq!(hf.rise_along(r, a, b, floor).is_some(), exact > floor);
+                    assert!(hf.rise_along(r, a, b, exact + 1e-6).is_none());
+                }
+            }
         }
     }
 }

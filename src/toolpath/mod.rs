@@ -2,6 +2,7 @@
 //! surface) for every tool shape, raster and waterline finishing,
 //! roughing, pass refinement and merging.
 
+pub mod along;
 pub mod arcs;
 pub mod dropcutter;
 pub mod path;

@@ -533,13 +533,21 @@ mod merge_tests {
 pub const CHECK: f64 = 2e-4;
 
 /// How deep the straight move a -> b would cut into the relief's surface
-/// (<= 0 when it cuts none): the exact swept tool against every sample it
-/// passes, then the drop-cutter at probes between them (`probe_gouge`).
+/// (<= 0 when it cuts none). A ball's is exact: the highest the CL
+/// surface rises over the move (`HeightField::rise_along`; rises under
+/// CHECK / 2 count as none). Other tools: the exact swept tool against
+/// every sample it passes, then the drop-cutter at probes between them
+/// (`probe_gouge`).
 ///
 /// `ends_on_cl`: a and b are drop-cutter points (or above them), where
 /// the tool touches no sample, which spares the sweep behind the lower
 /// end (`sample_gouge`).
 pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: bool) -> f64 {
+    if let Tool::Ball { .. } = tool {
+        return hf
+            .rise_along(tool.radius(), a, b, 0.5 * CHECK)
+            .unwrap_or(0.0);
+    }
     let at_samples = sample_gouge(hf, tool, a, b, ends_on_cl);
     at_samples.max(probe_gouge(hf, tool, a, b, at_samples.max(0.5 * CHECK)))
 }
