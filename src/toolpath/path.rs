@@ -993,7 +993,20 @@ pub fn check_and_refine(
                 })
                 .collect();
             let cl = drop_along(hf, tool, &xy, floor, Refine::Full);
-            Some(verify(hf, tool, &merge(&cl, tol), true))
+            let m = merge(&cl, tol);
+            // a ball's moves over the points just dropped: those are its
+            // probes, as for the row
+            Some(match (tool, stretches(&m, &cl)) {
+                (Tool::Ball { .. }, Some(s)) => {
+                    let g = m
+                        .windows(2)
+                        .zip(&s)
+                        .map(|(w, &(i, j))| dropped_move_gouge(hf, tool, w[0], w[1], &cl[i..=j]))
+                        .collect();
+                    lift_cuts(&m, g)
+                }
+                _ => verify(hf, tool, &m, true),
+            })
         })
         .collect();
     let mut out = vec![pts[0]];
@@ -1025,6 +1038,12 @@ pub fn verify(hf: &HeightField, tool: &Tool, pts: &[DVec3], ends_on_cl: bool) ->
         .par_windows(2)
         .map(|w| move_gouge(hf, tool, w[0], w[1], ends_on_cl))
         .collect();
+    lift_cuts(pts, gouges)
+}
+
+/// `pts` with every move whose gouge (one per move) passes CHECK raised
+/// by it: up at its start, across, down onto its end.
+fn lift_cuts(pts: &[DVec3], gouges: Vec<f64>) -> Vec<DVec3> {
     let mut out = vec![pts[0]];
     for (w, &g) in pts.windows(2).zip(&gouges) {
         if g > CHECK {
