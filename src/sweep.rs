@@ -25,6 +25,37 @@ pub fn cells_between(lo: f64, hi: f64, pitch: f64, n: usize) -> Option<(usize, u
     (i0 <= i1).then_some((i0, i1))
 }
 
+/// The part of the move a + t d (XY, t in 0..1) inside the rectangle
+/// [x0, y0, x1, y1], as its t interval (Liang-Barsky); None outside.
+#[inline]
+pub fn clip_to_rect(
+    a: (f64, f64),
+    d: (f64, f64),
+    [x0, y0, x1, y1]: [f64; 4],
+) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [
+        (-d.0, a.0 - x0),
+        (d.0, x1 - a.0),
+        (-d.1, a.1 - y0),
+        (d.1, y1 - a.1),
+    ] {
+        if p.abs() < 1e-15 {
+            if q < 0.0 {
+                return None;
+            }
+        } else {
+            let t = q / p;
+            if p < 0.0 {
+                t0 = t0.max(t);
+            } else {
+                t1 = t1.min(t);
+            }
+        }
+    }
+    (t0 <= t1).then_some((t0, t1))
+}
+
 /// The lowest point of the swept tool surface over a cell at offset w from
 /// the move's start (XY), or +inf when the tool does not reach it.
 pub struct Sweep {

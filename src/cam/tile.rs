@@ -49,35 +49,13 @@ pub fn clip(pts: &[DVec3], rect: [f64; 4]) -> Vec<Vec<DVec3>> {
     for w in pts.windows(2) {
         let (a, b) = (w[0], w[1]);
         let d = b - a;
-        // Liang-Barsky: the part of a + t d (t in 0..1) inside
-        let (mut t0, mut t1) = (0.0f64, 1.0f64);
-        let mut empty = false;
-        for (p, q) in [
-            (-d.x, a.x - x0),
-            (d.x, x1 - a.x),
-            (-d.y, a.y - y0),
-            (d.y, y1 - a.y),
-        ] {
-            if p.abs() < 1e-15 {
-                if q < 0.0 {
-                    empty = true;
-                }
-            } else {
-                let t = q / p;
-                if p < 0.0 {
-                    t0 = t0.max(t);
-                } else {
-                    t1 = t1.min(t);
-                }
-            }
-        }
-        if empty || t0 > t1 {
+        let Some((t0, t1)) = crate::sweep::clip_to_rect((a.x, a.y), (d.x, d.y), rect) else {
             if cur.len() > 1 {
                 out.push(std::mem::take(&mut cur));
             }
             cur.clear();
             continue;
-        }
+        };
         let (pa, pb) = (a + d * t0, a + d * t1);
         if cur.is_empty() || t0 > 0.0 {
             if cur.len() > 1 {

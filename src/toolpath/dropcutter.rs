@@ -234,6 +234,23 @@ impl HeightField {
         }
     }
 
+    /// The corners of cell (i, j): upper left, upper right, lower left,
+    /// lower right, as (x, y, z). Its triangles are a b c and b c d.
+    #[inline]
+    fn corners(&self, i: usize, j: usize) -> [[f64; 3]; 4] {
+        let l = &self.lattice;
+        let (x0, x1, yt, yb) = (l.vx(i), l.vx(i + 1), l.vy(j), l.vy(j + 1));
+        let w = self.vz.w;
+        let k = j * w + i;
+        let z = &self.vz.data;
+        [
+            [x0, yt, z[k]],
+            [x1, yt, z[k + 1]],
+            [x0, yb, z[k + w]],
+            [x1, yb, z[k + w + 1]],
+        ]
+    }
+
     /// The highest contact of the tool at (x, y) with the two triangles
     /// of cell (i, j); -inf when they are out of reach. A triangle that
     /// cannot beat `floor` is skipped: its facet's contact with its whole
@@ -250,13 +267,9 @@ impl HeightField {
         y: f64,
         floor: f64,
     ) -> f64 {
-        let l = &self.lattice;
-        let (x0, x1, yt, yb) = (l.vx(i), l.vx(i + 1), l.vy(j), l.vy(j + 1));
-        let w = self.vz.w;
-        let k = j * w + i;
-        let (za, zb) = (self.vz.data[k], self.vz.data[k + 1]);
-        let (zc, zd) = (self.vz.data[k + w], self.vz.data[k + w + 1]);
-        let (a, b, c, d) = ([x0, yt, za], [x1, yt, zb], [x0, yb, zc], [x1, yb, zd]);
+        let [a, b, c, d] = self.corners(i, j);
+        let ([x0, yt, za], [x1, yb, zd]) = (a, d);
+        let (zb, zc) = (b[2], c[2]);
         let (cw, chh) = (x1 - x0, yt - yb);
         let mut best = f64::NEG_INFINITY;
         let mut diag = None;
@@ -550,13 +563,9 @@ impl HeightField {
         (d2, low, high): (f64, f64, f64),
         best: f64,
     ) -> f64 {
-        let l = &self.lattice;
-        let (x0, x1, yt, yb) = (l.vx(i), l.vx(i + 1), l.vy(j), l.vy(j + 1));
-        let w = self.vz.w;
-        let k = j * w + i;
-        let (za, zb) = (self.vz.data[k], self.vz.data[k + 1]);
-        let (zc, zd) = (self.vz.data[k + w], self.vz.data[k + w + 1]);
-        let (a, b, c, d) = ([x0, yt, za], [x1, yt, zb], [x0, yb, zc], [x1, yb, zd]);
+        let [a, b, c, d] = self.corners(i, j);
+        let ([x0, yt, za], [x1, yb, zd]) = (a, d);
+        let (zb, zc) = (b[2], c[2]);
         let (cw, ch) = (x1 - x0, yt - yb);
         let corners = [a, b, c, d]
             .iter()
@@ -605,30 +614,8 @@ impl HeightField {
 /// x1, y1): 0 where they meet, else the least over the segment's ends and
 /// the rectangle's corners.
 fn segment_rect_d2(a: (f64, f64), b: (f64, f64), (x0, y0, x1, y1): (f64, f64, f64, f64)) -> f64 {
-    // the segment clipped to the rectangle (Liang-Barsky)
     let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-    let (mut lo, mut hi) = (0.0f64, 1.0f64);
-    let mut meets = true;
-    for (p, q) in [
-        (-dx, a.0 - x0),
-        (dx, x1 - a.0),
-        (-dy, a.1 - y0),
-        (dy, y1 - a.1),
-    ] {
-        if p == 0.0 {
-            if q < 0.0 {
-                meets = false;
-            }
-        } else {
-            let t = q / p;
-            if p < 0.0 {
-                lo = lo.max(t);
-            } else {
-                hi = hi.min(t);
-            }
-        }
-    }
-    if meets && lo <= hi {
+    if crate::sweep::clip_to_rect(a, (dx, dy), [x0, y0, x1, y1]).is_some() {
         return 0.0;
     }
     let to_rect = |x: f64, y: f64| {
