@@ -751,7 +751,7 @@ fn the_finishing_tool_keeps_to_the_subject() {
     assert!(far <= 3.175 + 2.0 * p, "{far}");
     // and the job is shorter than finishing the whole panel: roughing cuts
     // the background to its level, so nothing goes over it twice
-    let subject_s = estimated_s(&text);
+    let subject_s = rep["time_s"].as_f64().unwrap();
     let panel_job = d.join("panel.nc");
     ok(&run(&[
         "toolpath",
@@ -762,33 +762,12 @@ fn the_finishing_tool_keeps_to_the_subject() {
         panel_job.to_str().unwrap(),
         "-q",
     ]));
-    let panel_s = estimated_s(&std::fs::read_to_string(&panel_job).unwrap());
+    let panel_s = simulate_report(&panel_job, &relief, &d.join("cut.png"), &[])["time_s"]
+        .as_f64()
+        .unwrap();
     eprintln!("estimated {subject_s:.0} s on the subject, {panel_s:.0} s over the panel");
     assert!(subject_s < panel_s, "{subject_s} s against {panel_s} s");
     std::fs::remove_dir_all(d).unwrap();
-}
-
-/// A job's estimated run time (s), from its header comment.
-fn estimated_s(job: &str) -> f64 {
-    let line = job
-        .lines()
-        .find(|l| l.starts_with("(estimated time: "))
-        .unwrap();
-    let t = line["(estimated time: ".len()..]
-        .split(" on ")
-        .next()
-        .unwrap();
-    t.split_whitespace()
-        .map(|part| {
-            let (v, unit) = part.split_at(part.len() - 1);
-            let v: f64 = v.parse().unwrap();
-            v * match unit {
-                "h" => 3600.0,
-                "m" => 60.0,
-                _ => 1.0,
-            }
-        })
-        .sum()
 }
 
 /// Acceptance 7 (at test size): the armadillo's raster+waterline job

@@ -513,16 +513,11 @@ impl ToolpathJob {
                 bail!("--stock-to-leave {}: must be 0 or more", r.stock_to_leave);
             }
             // with --boundary subject, roughing cuts the level background to
-            // its height (the finishing tool keeps to the subject)
-            let lowered = subject.as_ref().map(|sub| {
-                let (z, zm) = (hf.samples(), hf_main.samples());
-                let bg = |i: usize, j: usize| !*sub.inside.get(i, j) && zm.get(i, j) == z.get(i, j);
-                let low = (0..z.h)
-                    .flat_map(|j| (0..z.w).map(move |i| (i, j)))
-                    .filter(|&(i, j)| bg(i, j))
-                    .map(|(i, j)| *z.get(i, j))
-                    .fold(f64::INFINITY, f64::min);
-                (rough::lower_background(hf_main, r.stock_to_leave, bg), low)
+            // its height (the finishing tool keeps to the subject): the
+            // samples off the subject, but not the pad's
+            let (z, zm) = (hf.samples(), hf_main.samples());
+            let bg = subject.as_ref().map(|sub| {
+                move |i: usize, j: usize| !*sub.inside.get(i, j) && zm.get(i, j) == z.get(i, j)
             });
             let params = rough::Params {
                 tool: rt,
@@ -532,10 +527,11 @@ impl ToolpathJob {
                 angle: self.angle,
                 region: panel,
                 material: None,
-                background: lowered.as_ref().map(|l| l.1).filter(|z| z.is_finite()),
+                background: bg
+                    .as_ref()
+                    .map(|f| f as &(dyn Fn(usize, usize) -> bool + Sync)),
             };
-            let hf_rough = lowered.as_ref().map_or(hf_main, |l| &l.0);
-            let passes = t.time("roughing", || rough::passes(hf_rough, floor, &params))?;
+            let passes = t.time("roughing", || rough::passes(hf_main, floor, &params))?;
             raw_points += passes.iter().map(|p| p.pts.len()).sum::<usize>();
             let passes = t.time("roughing check", || self.checked(hf_main, &rt, passes));
             let passes = t.time("stock", || planned.ramp_and_cut(passes, rt, false));

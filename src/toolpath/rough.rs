@@ -33,44 +33,57 @@ pub struct Params<'a> {
     /// earlier operations have cut the stock; `None`: untouched stock.
     /// Rows are cut at a layer only where material lies above it.
     pub material: Option<&'a (dyn Fn(f64, f64) -> f64 + Sync)>,
-    /// A level background's Z that roughing cuts to its final height (no
-    /// stock left on it), with `hf` holding the background's samples
-    /// lowered by `stock_to_leave` (`lower_background`): `None`, stock is
-    /// left everywhere.
-    pub background: Option<f64>,
+    /// The samples (i, j) of a level background that roughing cuts to
+    /// its final height, leaving no stock on it; `None`: stock is left
+    /// everywhere.
+    pub background: Option<&'a (dyn Fn(usize, usize) -> bool + Sync)>,
 }
 
-/// `hf`'s samples with those where `background` holds (and the pad's
-/// are not) lowered by `stl`: dropping the enlarged tool on them and
-/// adding `stl` back then gives, over a level background, the enlarged
-/// tool's own height on the real surface (it cuts the background to its
-/// level), and next to the subject the subject's samples still hold it
-/// `stl` off. Every real point under the real tool is one of these
-/// samples or between them, so the real tool touches nothing.
-pub fn lower_background(
+/// `hf`'s samples with those where `background` holds lowered by `stl`,
+/// and the lowest of those (None if there is none): dropping the
+/// enlarged tool on them and adding `stl` back then gives, over a level
+/// background, the enlarged tool's own height on the real surface (it
+/// cuts the background to its level), and next to the subject the
+/// subject's samples still hold it `stl` off. Every real point under the
+/// real tool is one of these samples or between them, so the real tool
+/// touches nothing.
+fn lower_background(
     hf: &HeightField,
     stl: f64,
-    background: impl Fn(usize, usize) -> bool + Sync,
-) -> HeightField {
+    background: &(dyn Fn(usize, usize) -> bool + Sync),
+) -> (HeightField, Option<f64>) {
     let z = hf.samples();
     let mut low = z.clone();
-    low.data
+    let lowest = low
+        .data
         .par_chunks_mut(z.w)
         .enumerate()
-        .for_each(|(j, row)| {
+        .map(|(j, row)| {
+            let mut lowest = f64::INFINITY;
             for (i, v) in row.iter_mut().enumerate() {
                 if background(i, j) {
+                    lowest = lowest.min(*v);
                     *v -= stl;
                 }
             }
-        });
-    HeightField::new(low, hf.pitch)
+            lowest
+        })
+        .reduce(|| f64::INFINITY, f64::min);
+    (
+        HeightField::new(low, hf.pitch),
+        lowest.is_finite().then_some(lowest),
+    )
 }
 
 /// The roughing passes over `p.region` of a relief whose background is
 /// `floor`.
 pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
     let stl = p.stock_to_leave;
+    let lowered = p.background.map(|bg| lower_background(hf, stl, bg));
+    let (hf, background) = match &lowered {
+        Some((low, z)) => (low, *z),
+        None => (hf, None),
+    };
     let big = match p.tool {
         t if stl == 0.0 => t,
         Tool::Flat { d } => Tool::Flat { d: d + 2.0 * stl },
@@ -80,7 +93,7 @@ pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
             t.spec()
         ),
     };
-    let bottom = p.background.unwrap_or(floor + stl);
+    let bottom = background.unwrap_or(floor + stl);
     if bottom >= 0.0 {
         bail!(
             "--stock-to-leave {stl}: leaves nothing to rough in a relief {:.3} mm deep",
@@ -230,7 +243,7 @@ mod tests {
         let dome = z.map(|v| *v > level);
         let hf = HeightField::new(z, pitch);
         let (tool, stl) = (Tool::Flat { d: 3.0 }, 0.3);
-        let low = lower_background(&hf, stl, |i, j| !*dome.get(i, j));
+        let field = |i: usize, j: usize| !*dome.get(i, j);
         let p = Params {
             tool,
             stepover: 1.2,
@@ -239,9 +252,9 @@ mod tests {
             angle: 0.0,
             region: [0.0, 0.0, 30.0, 30.0],
             material: None,
-            background: Some(level),
+            background: Some(&field),
         };
-        let passes = passes(&low, level, &p).unwrap();
+        let passes = passes(&hf, level, &p).unwrap();
         // the dome alone, its field sunk far below
         let only = HeightField::new(
             hf.samples()
