@@ -13,6 +13,11 @@
 //! for any block of cells, an upper bound (block max - profile at the
 //! block's nearest point) on what it can contribute; blocks that cannot
 //! beat the best contact found so far are skipped whole (branch and bound).
+//! For a ball, each block also keeps a plane and how far its surface rises
+//! above it (`plane_bound`): on sloping ground the highest corner sits on
+//! the block's uphill side while the ball meets its downhill side, and the
+//! plane's bound prunes what the corner's cannot (2048 px bunny raster
+//! drops 424k -> 792-825k points/s; ball:12 162k -> 455-475k).
 
 use crate::grid::Grid;
 use crate::surface::Lattice;
@@ -32,6 +37,10 @@ pub struct HeightField {
     /// levels[0] = highest corner of each cell; levels[k] = max over
     /// 2^k x 2^k blocks of cells.
     levels: Vec<Grid<f64>>,
+    /// For each block of levels[k], k >= 1: a plane through it (height at
+    /// the block's centre, slopes in x and y) and how far its highest
+    /// vertex rises above that plane (`plane_bound`).
+    planes: Vec<Vec<[f64; 4]>>,
     /// Max over runs of ROW_BLOCK samples along each row: lets a swept
     /// move's check skip stretches of a row lying below the tool.
     row_max: Grid<f64>,
@@ -83,6 +92,16 @@ impl HeightField {
             }
             levels.push(n);
         }
+        let (cw, ch) = lattice.cells();
+        let vx: Vec<f64> = (0..=cw).map(|i| lattice.vx(i)).collect();
+        let vy: Vec<f64> = (0..=ch).map(|j| lattice.vy(j)).collect();
+        let mut planes: Vec<Vec<[f64; 4]>> = vec![Vec::new()];
+        for k in 1..levels.len() {
+            let g = &levels[k];
+            let kids = (k > 1).then(|| (&planes[k - 1][..], levels[k - 1].w));
+            let p = block_planes((&vx, &vy), &vz, k, (g.w, g.h), kids);
+            planes.push(p);
+        }
         let bw = z.w.div_ceil(ROW_BLOCK);
         let row_max = Grid::from_vec(
             bw,
@@ -103,6 +122,7 @@ impl HeightField {
             samples: z,
             vz,
             levels,
+            planes,
             row_max,
         }
     }
@@ -124,6 +144,39 @@ impl HeightField {
             (i as f64 + 0.5) * self.pitch,
             self.top - (j as f64 + 0.5) * self.pitch,
         )
+    }
+
+    /// The extent of block (bx, by) at `level` in vertex indices: columns
+    /// i0..=i1, rows j0..=j1.
+    #[inline]
+    fn block_vertices(&self, level: usize, bx: usize, by: usize) -> (usize, usize, usize, usize) {
+        block_vertices(&self.lattice, level, bx, by)
+    }
+
+    /// An upper bound on what block (bx, by) at `level` >= 1 can hold a
+    /// ball of radius `r` at (x, y) to: its surface lies at most e above
+    /// its plane P, so the contact is at most e over the highest of P less
+    /// the ball's profile, taken over the block's rectangle with the
+    /// profile's parabola d^2 / 2r below it (separable: the best point is
+    /// the unconstrained one, x + r P', clamped), and over the whole plane
+    /// with the sphere itself (the ball's contact with P). On sloping
+    /// ground it is far tighter than the block's highest corner, which sits
+    /// on its uphill side while the ball meets its downhill side.
+    #[inline]
+    fn plane_bound(&self, level: usize, bx: usize, by: usize, x: f64, y: f64, r: f64) -> f64 {
+        let g = &self.levels[level];
+        let [z0, ax, ay, e] = self.planes[level][by * g.w + bx];
+        let (i0, i1, j0, j1) = self.block_vertices(level, bx, by);
+        let l = &self.lattice;
+        let (x0, x1, yt, yb) = (l.vx(i0), l.vx(i1), l.vy(j0), l.vy(j1));
+        let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (yt + yb));
+        let qx = (x + r * ax).clamp(x0, x1);
+        let qy = (y + r * ay).clamp(yb, yt);
+        let (dx, dy) = (qx - x, qy - y);
+        let parabola = z0 + ax * (qx - cx) + ay * (qy - cy) - (dx * dx + dy * dy) / (2.0 * r);
+        let sphere =
+            z0 + ax * (x - cx) + ay * (y - cy) + r * ((1.0 + ax * ax + ay * ay).sqrt() - 1.0);
+        parabola.min(sphere) + e
     }
 
     /// Squared distance from (x, y) to the rectangle of block (bx, by) at `level`,
@@ -363,6 +416,7 @@ impl HeightField {
             Tool::Ball { d } => 1.0 / d,
             _ => f64::NAN,
         };
+        let ball = !inv_d.is_nan();
         let below = |d2: f64| {
             if inv_d.is_nan() {
                 tool.profile_below(d2)
@@ -394,7 +448,11 @@ impl HeightField {
             for bx in i0..=i1.min(base.w - 1) {
                 let d2 = self.block_distance(start, bx, by, x, y);
                 if d2 <= r * r {
-                    stack.push((base.get(bx, by) - tool.profile_below(d2), start, bx, by));
+                    let mut b = base.get(bx, by) - tool.profile_below(d2);
+                    if ball && start >= 1 && b > best {
+                        b = b.min(self.plane_bound(start, bx, by, x, y, r));
+                    }
+                    stack.push((b, start, bx, by));
                 }
             }
         }
@@ -440,7 +498,10 @@ impl HeightField {
                 if d2 > r2 {
                     continue;
                 }
-                let b = child.data[cy * child.w + cx] - below(d2);
+                let mut b = child.data[cy * child.w + cx] - below(d2);
+                if ball && level >= 2 && b > best {
+                    b = b.min(self.plane_bound(level - 1, cx, cy, x, y, r));
+                }
                 if b > best {
                     kids[nk] = (b, level - 1, cx, cy);
                     nk += 1;
@@ -474,17 +535,34 @@ impl HeightField {
             let x0 = bx as f64 * s - 0.5 * p;
             let y1 = self.top + 0.5 * p - by as f64 * s;
             let d2 = segment_rect_d2((a.x, a.y), (b.x, b.y), (x0, y1 - s, x0 + s, y1));
-            let low = if len2 > 0.0 {
+            let (lo, hi) = if len2 > 0.0 {
                 let t = |x: f64, y: f64| ((x - a.x) * dx + (y - a.y) * dy) / len2;
                 let ts = [t(x0, y1 - s), t(x0 + s, y1 - s), t(x0, y1), t(x0 + s, y1)];
                 let lo = ts.iter().cloned().fold(f64::INFINITY, f64::min) - reach_t;
                 let hi = ts.iter().cloned().fold(f64::NEG_INFINITY, f64::max) + reach_t;
-                let z = |t: f64| a.z + (b.z - a.z) * t.clamp(0.0, 1.0);
-                z(lo).min(z(hi))
+                (lo.clamp(0.0, 1.0), hi.clamp(0.0, 1.0))
             } else {
-                a.z.min(b.z)
+                (0.0, 1.0)
             };
-            (d2, low)
+            let z = |t: f64| a.z + (b.z - a.z) * t;
+            (d2, z(lo).min(z(hi)), (lo, hi))
+        };
+        // a block at level >= 1 holds the ball at most its plane's contact
+        // with it plus its rise above the plane (`plane_bound`): along the
+        // move, less the tip's height, that is linear in t, so highest at
+        // an end of the stretch where the ball reaches the block
+        let plane_rise = |level: usize, bx: usize, by: usize, (lo, hi): (f64, f64)| {
+            let g = &self.levels[level];
+            let [z0, ax, ay, e] = self.planes[level][by * g.w + bx];
+            let (i0, i1, j0, j1) = self.block_vertices(level, bx, by);
+            let l = &self.lattice;
+            let (cx, cy) = (0.5 * (l.vx(i0) + l.vx(i1)), 0.5 * (l.vy(j0) + l.vy(j1)));
+            let lift = r * ((1.0 + ax * ax + ay * ay).sqrt() - 1.0) + e;
+            let at = |t: f64| {
+                let q = path.a + path.d * t;
+                z0 + ax * (q.x - cx) + ay * (q.y - cy) - q.z
+            };
+            at(lo).max(at(hi)) + lift
         };
         let mut best = floor;
         let reach = (2.0 * r / p).max(1.0);
@@ -498,9 +576,13 @@ impl HeightField {
         let mut stack: Vec<(f64, usize, usize, usize)> = Vec::new();
         for by in j0..=j1.min(base.h - 1) {
             for bx in i0..=i1.min(base.w - 1) {
-                let (d2, low) = near(start, bx, by);
+                let (d2, low, span) = near(start, bx, by);
                 if d2 <= r * r {
-                    stack.push((base.get(bx, by) - below(d2) - low, start, bx, by));
+                    let mut k = base.get(bx, by) - below(d2) - low;
+                    if start >= 1 && k > best {
+                        k = k.min(plane_rise(start, bx, by, span));
+                    }
+                    stack.push((k, start, bx, by));
                 }
             }
         }
@@ -510,7 +592,7 @@ impl HeightField {
                 continue;
             }
             if level == 0 {
-                let (d2, low) = near(0, bx, by);
+                let (d2, low, _) = near(0, bx, by);
                 let high = *self.levels[0].get(bx, by);
                 best = best.max(self.cell_rise(&path, r, bx, by, (d2, low, high), best));
                 continue;
@@ -527,11 +609,14 @@ impl HeightField {
                 if cx >= child.w || cy >= child.h {
                     continue;
                 }
-                let (d2, low) = near(level - 1, cx, cy);
+                let (d2, low, span) = near(level - 1, cx, cy);
                 if d2 > r * r {
                     continue;
                 }
-                let k = child.data[cy * child.w + cx] - below(d2) - low;
+                let mut k = child.data[cy * child.w + cx] - below(d2) - low;
+                if level >= 2 && k > best {
+                    k = k.min(plane_rise(level - 1, cx, cy, span));
+                }
                 if k > best {
                     kids[nk] = (k, level - 1, cx, cy);
                     nk += 1;
@@ -613,6 +698,95 @@ impl HeightField {
 /// Squared distance from the segment a -> b to the rectangle (x0, y0,
 /// x1, y1): 0 where they meet, else the least over the segment's ends and
 /// the rectangle's corners.
+/// The vertex columns i0..=i1 and rows j0..=j1 of block (bx, by) at
+/// `level` (its cells bx 2^level.. and by 2^level.., within the lattice).
+#[inline]
+fn block_vertices(l: &Lattice, level: usize, bx: usize, by: usize) -> (usize, usize, usize, usize) {
+    let (cw, ch) = l.cells();
+    let i0 = (bx << level).min(cw);
+    let j0 = (by << level).min(ch);
+    (
+        i0,
+        ((bx + 1) << level).min(cw),
+        j0,
+        ((by + 1) << level).min(ch),
+    )
+}
+
+/// Each block's plane at `level` (w x h blocks): through its corners'
+/// mean at its centre, with their mean slopes, and how far the surface
+/// rises above it: its vertices' highest rise at level 1, above that a
+/// bound from the four children (each lies within its own rise above its
+/// plane, which departs from this one linearly, so by most at a corner).
+/// `v`: the lattice's vertex X and Y.
+fn block_planes(
+    (vx, vy): (&[f64], &[f64]),
+    vz: &Grid<f64>,
+    level: usize,
+    (w, h): (usize, usize),
+    children: Option<(&[[f64; 4]], usize)>,
+) -> Vec<[f64; 4]> {
+    use rayon::prelude::*;
+    let (cw, ch) = (vx.len() - 1, vy.len() - 1);
+    let span = |level: usize, b: usize, n: usize| ((b << level).min(n), ((b + 1) << level).min(n));
+    (0..w * h)
+        .into_par_iter()
+        .map(|k| {
+            let (bx, by) = (k % w, k / w);
+            let ((i0, i1), (j0, j1)) = (span(level, bx, cw), span(level, by, ch));
+            let z = |i: usize, j: usize| vz.data[j * vz.w + i];
+            let (cx, cy) = (0.5 * (vx[i0] + vx[i1]), 0.5 * (vy[j0] + vy[j1]));
+            let (a, b, c, d) = (z(i0, j0), z(i1, j0), z(i0, j1), z(i1, j1));
+            let z0 = 0.25 * (a + b + c + d);
+            let wx = vx[i1] - vx[i0];
+            let wy = vy[j0] - vy[j1];
+            let ax = if wx > 0.0 {
+                0.5 * (b + d - a - c) / wx
+            } else {
+                0.0
+            };
+            let ay = if wy > 0.0 {
+                0.5 * (a + b - c - d) / wy
+            } else {
+                0.0
+            };
+            let plane = |x: f64, y: f64| z0 + ax * (x - cx) + ay * (y - cy);
+            let mut e = f64::NEG_INFINITY;
+            match children {
+                Some((kids, kw)) => {
+                    let kh = kids.len() / kw;
+                    for ky in 2 * by..(2 * by + 2).min(kh) {
+                        for kx in 2 * bx..(2 * bx + 2).min(kw) {
+                            let [kz, kax, kay, ke] = kids[ky * kw + kx];
+                            let ((ki0, ki1), (kj0, kj1)) =
+                                (span(level - 1, kx, cw), span(level - 1, ky, ch));
+                            let (kcx, kcy) = (0.5 * (vx[ki0] + vx[ki1]), 0.5 * (vy[kj0] + vy[kj1]));
+                            for (x, y) in [
+                                (vx[ki0], vy[kj0]),
+                                (vx[ki1], vy[kj0]),
+                                (vx[ki0], vy[kj1]),
+                                (vx[ki1], vy[kj1]),
+                            ] {
+                                e = e
+                                    .max(ke + kz + kax * (x - kcx) + kay * (y - kcy) - plane(x, y));
+                            }
+                        }
+                    }
+                }
+                None => {
+                    for (j, &y) in vy.iter().enumerate().take(j1 + 1).skip(j0) {
+                        for (i, &x) in vx.iter().enumerate().take(i1 + 1).skip(i0) {
+                            e = e.max(z(i, j) - plane(x, y));
+                        }
+                    }
+                }
+            }
+            // rounding: the bound must stay above the surface
+            [z0, ax, ay, e + 1e-9 * (1.0 + z0.abs())]
+        })
+        .collect()
+}
+
 fn segment_rect_d2(a: (f64, f64), b: (f64, f64), (x0, y0, x1, y1): (f64, f64, f64, f64)) -> f64 {
     let (dx, dy) = (b.0 - a.0, b.1 - a.1);
     if crate::sweep::clip_to_rect(a, (dx, dy), [x0, y0, x1, y1]).is_some() {
@@ -882,6 +1056,41 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A block's plane bound is never below what any of its cells holds
+    /// the ball to, on smooth, noisy and stepped fields, at every level:
+    /// the drop-cutter may prune a block by it.
+    #[test]
+    fn plane_bounds_hold_every_cell_of_their_block() {
+        let mut rnd = rng(7);
+        let mut worst = f64::INFINITY;
+        for (seed, rough) in [(1, false), (2, true), (3, false)] {
+            let hf = field(90, 70, 0.1, seed, rough);
+            let (cw, ch) = hf.lattice.cells();
+            for r in [0.5, 1.5875] {
+                let tool = Tool::Ball { d: 2.0 * r };
+                for _ in 0..300 {
+                    let (x, y) = (rnd() * 9.0, rnd() * 7.0);
+                    for level in 1..hf.levels.len() {
+                        let g = &hf.levels[level];
+                        let (bx, by) =
+                            ((rnd() * g.w as f64) as usize, (rnd() * g.h as f64) as usize);
+                        let (i0, i1, j0, j1) = hf.block_vertices(level, bx, by);
+                        let held = (j0..j1.min(ch))
+                            .flat_map(|j| (i0..i1.min(cw)).map(move |i| (i, j)))
+                            .filter_map(|(i, j)| hf.contribution(&tool, i, j, x, y))
+                            .fold(f64::NEG_INFINITY, f64::max);
+                        if held.is_finite() {
+                            let bound = hf.plane_bound(level, bx, by, x, y, r);
+                            assert!(bound >= held, "level {level}: bound {bound} < {held}");
+                            worst = worst.min(bound - held);
+                        }
+                    }
+                }
+            }
+        }
+        assert!(worst < 1e-3, "bounds never tight: {worst}");
     }
 
     #[test]

@@ -18,7 +18,13 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// How closely a contour point is placed on its level (mm, on the low side).
-const LEVEL_TOL: f64 = 1e-4;
+/// A micrometre, not a tenth: the moves between crossings then mostly run
+/// clear of the CL surface by more than the drop-cutter's cell bounds
+/// (the ball's Jensen gap over a cell, 0.38 um at 2048 px), so `refine`'s
+/// probes and `clear`'s exact check prune instead of descending to every
+/// contact cell (2048 px bunny: the waterline stage 10-24% faster, 1.2%
+/// fewer lines, mean residual 0.0034 mm against 0.0033).
+const LEVEL_TOL: f64 = 1e-3;
 
 /// The CL surface on a node grid: node (i, j) at (x0 + i p, y0 + j p).
 pub struct ClGrid {
