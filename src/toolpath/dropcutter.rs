@@ -99,7 +99,7 @@ impl HeightField {
         for k in 1..levels.len() {
             let g = &levels[k];
             let kids = (k > 1).then(|| (&planes[k - 1][..], levels[k - 1].w));
-            let p = block_planes((&vx, &vy), &vz, k, (g.w, g.h), kids);
+            let p = block_planes(&lattice, (&vx, &vy), &vz, k, (g.w, g.h), kids);
             planes.push(p);
         }
         let bw = z.w.div_ceil(ROW_BLOCK);
@@ -695,9 +695,6 @@ impl HeightField {
     }
 }
 
-/// Squared distance from the segment a -> b to the rectangle (x0, y0,
-/// x1, y1): 0 where they meet, else the least over the segment's ends and
-/// the rectangle's corners.
 /// The vertex columns i0..=i1 and rows j0..=j1 of block (bx, by) at
 /// `level` (its cells bx 2^level.. and by 2^level.., within the lattice).
 #[inline]
@@ -720,6 +717,7 @@ fn block_vertices(l: &Lattice, level: usize, bx: usize, by: usize) -> (usize, us
 /// plane, which departs from this one linearly, so by most at a corner).
 /// `v`: the lattice's vertex X and Y.
 fn block_planes(
+    l: &Lattice,
     (vx, vy): (&[f64], &[f64]),
     vz: &Grid<f64>,
     level: usize,
@@ -727,13 +725,11 @@ fn block_planes(
     children: Option<(&[[f64; 4]], usize)>,
 ) -> Vec<[f64; 4]> {
     use rayon::prelude::*;
-    let (cw, ch) = (vx.len() - 1, vy.len() - 1);
-    let span = |level: usize, b: usize, n: usize| ((b << level).min(n), ((b + 1) << level).min(n));
     (0..w * h)
         .into_par_iter()
         .map(|k| {
             let (bx, by) = (k % w, k / w);
-            let ((i0, i1), (j0, j1)) = (span(level, bx, cw), span(level, by, ch));
+            let (i0, i1, j0, j1) = block_vertices(l, level, bx, by);
             let z = |i: usize, j: usize| vz.data[j * vz.w + i];
             let (cx, cy) = (0.5 * (vx[i0] + vx[i1]), 0.5 * (vy[j0] + vy[j1]));
             let (a, b, c, d) = (z(i0, j0), z(i1, j0), z(i0, j1), z(i1, j1));
@@ -758,8 +754,7 @@ fn block_planes(
                     for ky in 2 * by..(2 * by + 2).min(kh) {
                         for kx in 2 * bx..(2 * bx + 2).min(kw) {
                             let [kz, kax, kay, ke] = kids[ky * kw + kx];
-                            let ((ki0, ki1), (kj0, kj1)) =
-                                (span(level - 1, kx, cw), span(level - 1, ky, ch));
+                            let (ki0, ki1, kj0, kj1) = block_vertices(l, level - 1, kx, ky);
                             let (kcx, kcy) = (0.5 * (vx[ki0] + vx[ki1]), 0.5 * (vy[kj0] + vy[kj1]));
                             for (x, y) in [
                                 (vx[ki0], vy[kj0]),
@@ -787,6 +782,9 @@ fn block_planes(
         .collect()
 }
 
+/// Squared distance from the segment a -> b to the rectangle (x0, y0,
+/// x1, y1): 0 where they meet, else the least over the segment's ends and
+/// the rectangle's corners.
 fn segment_rect_d2(a: (f64, f64), b: (f64, f64), (x0, y0, x1, y1): (f64, f64, f64, f64)) -> f64 {
     let (dx, dy) = (b.0 - a.0, b.1 - a.1);
     if crate::sweep::clip_to_rect(a, (dx, dy), [x0, y0, x1, y1]).is_some() {
