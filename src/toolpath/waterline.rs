@@ -18,13 +18,15 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// How closely a contour point is placed on its level (mm, on the low side).
-/// A micrometre, not a tenth: the moves between crossings then mostly run
-/// clear of the CL surface by more than the drop-cutter's cell bounds
-/// (the ball's Jensen gap over a cell, 0.38 um at 2048 px), so `refine`'s
-/// probes and `clear`'s exact check prune instead of descending to every
-/// contact cell (2048 px bunny: the waterline stage 10-24% faster, 1.2%
-/// fewer lines, mean residual 0.0034 mm against 0.0033).
-const LEVEL_TOL: f64 = 1e-3;
+/// Two micrometres, not a tenth: the moves between crossings then mostly
+/// run clear of the CL surface by more than the drop-cutter's cell bounds
+/// (the ball's Jensen gap over a cell, 0.58 um at 2048 px), so `refine`'s
+/// probes and `clear`'s exact check prune instead of evaluating every
+/// contact cell. 2048 px bunny: the check visits 2.53 million cells (3.26
+/// at 1 um) and takes 224k of them past their corners (619k); the stage
+/// took 10-24% less time at 1 um than at 0.1 um, and 8-13% less again at
+/// 2 um; residual mean 0.0035 mm against 0.0033, max 0.061 mm throughout.
+const LEVEL_TOL: f64 = 2e-3;
 
 /// The CL surface on a node grid: node (i, j) at (x0 + i p, y0 + j p).
 pub struct ClGrid {
@@ -734,13 +736,13 @@ mod tests {
                             let t = k as f64 / 64.0 * std::f64::consts::TAU;
                             cl(q.x + 1e-3 * t.cos(), q.y + 1e-3 * t.sin()) >= l
                         });
-                        worst = worst.max(if near { below.min(1e-3) } else { below });
+                        worst = worst.max(if near { below.min(LEVEL_TOL) } else { below });
                         count += 1;
                     }
                 }
             }
             assert!(count > 100, "{spec}: {count} points");
-            assert!(worst <= 1e-3, "{spec}: off by {worst}");
+            assert!(worst <= LEVEL_TOL, "{spec}: off by {worst}");
         }
     }
 
