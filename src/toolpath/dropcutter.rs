@@ -17,7 +17,7 @@
 //! above it (`plane_bound`): on sloping ground the highest corner sits on
 //! the block's uphill side while the ball meets its downhill side, and the
 //! plane's bound prunes what the corner's cannot (2048 px bunny raster
-//! drops 424k -> 792-825k points/s; ball:12 162k -> 455-475k).
+//! drops 424k -> 760-825k points/s; ball:12 162k -> 444-513k).
 
 use crate::grid::Grid;
 use crate::surface::Lattice;
@@ -38,8 +38,8 @@ pub struct HeightField {
     /// 2^k x 2^k blocks of cells.
     levels: Vec<Grid<f64>>,
     /// For each block of levels[k], k >= 1: a plane through it (height at
-    /// the block's centre, slopes in x and y) and how far its highest
-    /// vertex rises above that plane (`plane_bound`).
+    /// the block's centre, slopes in x and y) and a bound on how far its
+    /// surface rises above that plane (`plane_bound`).
     planes: Vec<Vec<[f64; 4]>>,
     /// Max over runs of ROW_BLOCK samples along each row: lets a swept
     /// move's check skip stretches of a row lying below the tool.
@@ -715,7 +715,7 @@ fn block_vertices(l: &Lattice, level: usize, bx: usize, by: usize) -> (usize, us
 /// rises above it: its vertices' highest rise at level 1, above that a
 /// bound from the four children (each lies within its own rise above its
 /// plane, which departs from this one linearly, so by most at a corner).
-/// `v`: the lattice's vertex X and Y.
+/// `vx`, `vy`: the lattice's vertex X and Y.
 fn block_planes(
     l: &Lattice,
     (vx, vy): (&[f64], &[f64]),
