@@ -164,19 +164,31 @@ impl HeightField {
     /// on its uphill side while the ball meets its downhill side.
     #[inline]
     fn plane_bound(&self, level: usize, bx: usize, by: usize, x: f64, y: f64, r: f64) -> f64 {
-        let g = &self.levels[level];
-        let [z0, ax, ay, e] = self.planes[level][by * g.w + bx];
+        let p = self.block_plane(level, bx, by);
+        let (x0, x1, yt, yb) = p.rect;
+        let qx = (x + r * p.ax).clamp(x0, x1);
+        let qy = (y + r * p.ay).clamp(yb, yt);
+        let (dx, dy) = (qx - x, qy - y);
+        let parabola = p.at(qx, qy) - (dx * dx + dy * dy) / (2.0 * r);
+        let sphere = p.at(x, y) + p.ball_lift(r);
+        parabola.min(sphere) + p.e
+    }
+
+    /// Block (bx, by)'s plane at `level` >= 1, with its rectangle.
+    #[inline]
+    fn block_plane(&self, level: usize, bx: usize, by: usize) -> BlockPlane {
+        let [z0, ax, ay, e] = self.planes[level][by * self.levels[level].w + bx];
         let (i0, i1, j0, j1) = self.block_vertices(level, bx, by);
         let l = &self.lattice;
-        let (x0, x1, yt, yb) = (l.vx(i0), l.vx(i1), l.vy(j0), l.vy(j1));
-        let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (yt + yb));
-        let qx = (x + r * ax).clamp(x0, x1);
-        let qy = (y + r * ay).clamp(yb, yt);
-        let (dx, dy) = (qx - x, qy - y);
-        let parabola = z0 + ax * (qx - cx) + ay * (qy - cy) - (dx * dx + dy * dy) / (2.0 * r);
-        let sphere =
-            z0 + ax * (x - cx) + ay * (y - cy) + r * ((1.0 + ax * ax + ay * ay).sqrt() - 1.0);
-        parabola.min(sphere) + e
+        let rect = (l.vx(i0), l.vx(i1), l.vy(j0), l.vy(j1));
+        BlockPlane {
+            rect,
+            centre: (0.5 * (rect.0 + rect.1), 0.5 * (rect.2 + rect.3)),
+            z0,
+            ax,
+            ay,
+            e,
+        }
     }
 
     /// Squared distance from (x, y) to the rectangle of block (bx, by) at `level`,
@@ -416,7 +428,7 @@ impl HeightField {
             Tool::Ball { d } => 1.0 / d,
             _ => f64::NAN,
         };
-        let ball = !inv_d.is_nan();
+        let ball = matches!(tool, Tool::Ball { .. });
         let below = |d2: f64| {
             if inv_d.is_nan() {
                 tool.profile_below(d2)
@@ -552,17 +564,12 @@ impl HeightField {
         // move, less the tip's height, that is linear in t, so highest at
         // an end of the stretch where the ball reaches the block
         let plane_rise = |level: usize, bx: usize, by: usize, (lo, hi): (f64, f64)| {
-            let g = &self.levels[level];
-            let [z0, ax, ay, e] = self.planes[level][by * g.w + bx];
-            let (i0, i1, j0, j1) = self.block_vertices(level, bx, by);
-            let l = &self.lattice;
-            let (cx, cy) = (0.5 * (l.vx(i0) + l.vx(i1)), 0.5 * (l.vy(j0) + l.vy(j1)));
-            let lift = r * ((1.0 + ax * ax + ay * ay).sqrt() - 1.0) + e;
+            let pl = self.block_plane(level, bx, by);
             let at = |t: f64| {
                 let q = path.a + path.d * t;
-                z0 + ax * (q.x - cx) + ay * (q.y - cy) - q.z
+                pl.at(q.x, q.y) - q.z
             };
-            at(lo).max(at(hi)) + lift
+            at(lo).max(at(hi)) + pl.ball_lift(r) + pl.e
         };
         let mut best = floor;
         let reach = (2.0 * r / p).max(1.0);
@@ -692,6 +699,33 @@ impl HeightField {
             .map(|(i, j)| self.cell_contact(tool, r, i, j, x, y, f64::NEG_INFINITY))
             .fold(f64::NEG_INFINITY, f64::max);
         best.is_finite().then_some(best)
+    }
+}
+
+/// A block's plane from `HeightField::planes`, with the block's
+/// rectangle (x0, x1, y top, y bottom) and centre.
+struct BlockPlane {
+    rect: (f64, f64, f64, f64),
+    centre: (f64, f64),
+    z0: f64,
+    ax: f64,
+    ay: f64,
+    /// How far the block's surface may rise above the plane.
+    e: f64,
+}
+
+impl BlockPlane {
+    /// The plane's height at (x, y).
+    #[inline]
+    fn at(&self, x: f64, y: f64) -> f64 {
+        self.z0 + self.ax * (x - self.centre.0) + self.ay * (y - self.centre.1)
+    }
+
+    /// How far above the plane at its axis a ball of radius `r` touching
+    /// it sits: r (sqrt(1 + slope^2) - 1).
+    #[inline]
+    fn ball_lift(&self, r: f64) -> f64 {
+        r * ((1.0 + self.ax * self.ax + self.ay * self.ay).sqrt() - 1.0)
     }
 }
 
