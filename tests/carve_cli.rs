@@ -293,60 +293,76 @@ fn other_tools_finish_without_gouging() {
 }
 
 /// Arcs: at a tolerance that leaves GRBL's chords room, raster rows become
-/// G18 arcs; the job has fewer lines, cuts without gouge and leaves what
-/// the straight job leaves within the tolerance.
+/// G18 arcs and waterlines G17 arcs (raster+waterline, so that both jobs
+/// finish the whole panel); the job has fewer lines, cuts without gouge and
+/// leaves what the straight job leaves within the tolerance.
 #[test]
 fn arcs_cut_what_straight_moves_cut() {
     let d = scratch("carve-arcs");
-    let mut cuts = Vec::new();
-    let mut lines = Vec::new();
-    for arcs in ["on", "off"] {
-        let job = d.join(format!("job-{arcs}.nc"));
-        ok(&run(&[
-            "carve",
-            "--resolution",
-            "200",
-            "--width",
-            "60",
-            "--depth",
-            "3",
-            "--tool",
-            "ball:2",
-            "--machine",
-            "shapeoko",
-            "--allow-deep-cuts",
-            "--tolerance",
-            "0.02",
-            "--arcs",
-            arcs,
-            "-o",
-            job.to_str().unwrap(),
-            "-q",
-        ]));
-        let text = std::fs::read_to_string(&job).unwrap();
-        let arc_lines = text
-            .lines()
-            .filter(|l| l.contains("G2 ") || l.contains("G3 "))
-            .count();
-        assert_eq!(arc_lines > 100, arcs == "on", "{arcs}: {arc_lines} arcs");
-        assert_eq!(text.contains("G18"), arcs == "on");
-        let relief = d.join(format!("job-{arcs}-relief.png"));
-        let cut = d.join(format!("cut-{arcs}.png"));
-        let report = simulate_report(&job, &relief, &cut, &["--machine", "shapeoko"]);
-        let gouge = report["max_gouge_mm"].as_f64().unwrap();
-        assert!(gouge <= 0.001, "arcs {arcs}: gouge {gouge} mm");
-        lines.push(text.lines().count());
-        cuts.push(relief_mm(&cut).2);
+    // (finish, least arcs, the arcs' plane: the centre word it takes)
+    for (finish, least, centre) in [("raster", 100, " K"), ("raster+waterline", 20, " J")] {
+        let mut cuts = Vec::new();
+        let mut lines = Vec::new();
+        for arcs in ["on", "off"] {
+            let job = d.join(format!("job-{finish}-{arcs}.nc"));
+            ok(&run(&[
+                "carve",
+                "--resolution",
+                "200",
+                "--width",
+                "60",
+                "--depth",
+                "3",
+                "--tool",
+                "ball:2",
+                "--machine",
+                "shapeoko",
+                "--allow-deep-cuts",
+                "--finish",
+                finish,
+                "--tolerance",
+                "0.02",
+                "--arcs",
+                arcs,
+                "-o",
+                job.to_str().unwrap(),
+                "-q",
+            ]));
+            let text = std::fs::read_to_string(&job).unwrap();
+            let arc_lines = text
+                .lines()
+                .filter(|l| (l.contains("G2 ") || l.contains("G3 ")) && l.contains(centre))
+                .count();
+            assert_eq!(
+                arc_lines > least,
+                arcs == "on",
+                "{finish}, arcs {arcs}: {arc_lines} arcs"
+            );
+            if finish == "raster" {
+                assert_eq!(text.contains("G18"), arcs == "on");
+            }
+            let relief = d.join(format!("job-{finish}-{arcs}-relief.png"));
+            let cut = d.join(format!("cut-{finish}-{arcs}.png"));
+            let report = simulate_report(&job, &relief, &cut, &["--machine", "shapeoko"]);
+            let gouge = report["max_gouge_mm"].as_f64().unwrap();
+            assert!(gouge <= 0.001, "{finish}, arcs {arcs}: gouge {gouge} mm");
+            lines.push(text.lines().count());
+            cuts.push(relief_mm(&cut).2);
+        }
+        eprintln!(
+            "{finish}: lines with arcs {}, without {}",
+            lines[0], lines[1]
+        );
+        assert!(lines[0] * 10 <= lines[1] * 9, "{finish}: {lines:?}");
+        let worst = cuts[0]
+            .iter()
+            .zip(&cuts[1])
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f64, f64::max);
+        // (each within the tolerance of the CL surface, measured square to
+        // the move: more than 0.02 mm upright on slopes)
+        assert!(worst <= 0.03, "{finish}: the cuts differ by {worst} mm");
     }
-    eprintln!("lines with arcs {}, without {}", lines[0], lines[1]);
-    assert!(lines[0] * 10 <= lines[1] * 9, "{lines:?}");
-    let worst = cuts[0]
-        .iter()
-        .zip(&cuts[1])
-        .map(|(a, b)| (a - b).abs())
-        .fold(0.0f64, f64::max);
-    // (each within the tolerance of the CL surface, measured square to
-    // the move: more than 0.02 mm upright on slopes)
-    assert!(worst <= 0.03, "the cuts differ by {worst} mm");
+
     std::fs::remove_dir_all(d).unwrap();
 }

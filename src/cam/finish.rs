@@ -6,7 +6,7 @@ use crate::gcode::emit::Settings;
 use crate::relief::Relief;
 use crate::tool::Tool;
 use crate::toolpath::dropcutter::HeightField;
-use crate::toolpath::{path, raster, rough, waterline, Pass};
+use crate::toolpath::{contour_arcs, path, raster, rough, waterline, Pass};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -187,12 +187,16 @@ impl ToolpathJob {
             .map(|(n, c)| {
                 let c = waterline::place(hf, tool, floor, c);
                 let c = waterline::refine(hf, tool, floor, &c);
-                let mut pts = waterline::simplify(&c, self.tolerance);
+                let mut pts = if self.arcs {
+                    contour_arcs::fit(&c.pts, &c.slope, self.tolerance)
+                } else {
+                    waterline::simplify(&c, self.tolerance)
+                };
                 if climb {
                     pts.reverse();
                 }
                 // within the panel, where the job's travel is checked
-                let pts = waterline::clear(hf, tool, &pts);
+                let pts = waterline::clear(hf, tool, &pts, self.arcs);
                 let pieces = tile::clip(&pts, [0.0, 0.0, w, h]);
                 let whole = pieces.len() == 1 && pieces[0].len() == pts.len();
                 let closed = c.closed && whole;

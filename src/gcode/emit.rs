@@ -376,7 +376,8 @@ impl Emitter {
 
 /// The longest run of `pts` from `i` that is exactly the chords GRBL cuts
 /// one arc into (at least two chords, in one plane, equal angles, ends on
-/// the circle): its last index and the arc.
+/// the circle, the linear axis in equal steps: a helix where they are not
+/// nought, as a ramp along a waterline's arc): its last index and the arc.
 pub fn arc_run(pts: &[DVec3], i: usize, tol: f64) -> Option<(usize, Arc)> {
     const EPS: f64 = 1e-9;
     if i + 2 >= pts.len() {
@@ -387,7 +388,7 @@ pub fn arc_run(pts: &[DVec3], i: usize, tol: f64) -> Option<(usize, Arc)> {
         Plane::Zx
     } else if p0.x == p1.x && p1.x == p2.x {
         Plane::Yz
-    } else if p0.z == p1.z && p1.z == p2.z {
+    } else if ((p2.z - p1.z) - (p1.z - p0.z)).abs() < EPS {
         Plane::Xy
     } else {
         return None;
@@ -412,11 +413,12 @@ pub fn arc_run(pts: &[DVec3], i: usize, tol: f64) -> Option<(usize, Arc)> {
     let chord = (x1 - x0).hypot(y1 - y0);
     let turn = |a: (f64, f64), b: (f64, f64)| (a.0 - cx) * (b.1 - cy) - (a.1 - cy) * (b.0 - cx);
     let cw = turn((x0, y0), (x1, y1)) < 0.0;
+    let step = p1[lin] - p0[lin];
     let mut j = i + 1;
     while j + 1 < pts.len() {
         let (a, b) = (pts[j], pts[j + 1]);
         let (pa, pb) = (q(a), q(b));
-        let same = b[lin] == p0[lin]
+        let same = ((b[lin] - a[lin]) - step).abs() < EPS
             && ((pb.0 - cx).hypot(pb.1 - cy) - r).abs() < EPS
             && ((pb.0 - pa.0).hypot(pb.1 - pa.1) - chord).abs() < EPS
             && (turn(pa, pb) < 0.0) == cw;
@@ -548,17 +550,32 @@ mod inch_tests {
 mod arc_tests {
     use super::*;
 
-    /// A fitted row written with arcs reads back as the very chords the
-    /// fit checked.
-    #[test]
-    fn arcs_read_back_as_the_checked_chords() {
-        let s = Settings {
+    /// A finish's feeds and speed, no dwell.
+    fn no_dwell() -> Settings {
+        Settings {
             feed: 1000.0,
             plunge_feed: 300.0,
             rpm: 18000.0,
             safe_z: 5.0,
             dwell: 0.0,
-        };
+        }
+    }
+
+    /// The ends of a program's feed moves (arcs as their chords).
+    fn feeds(g: &str) -> Vec<DVec3> {
+        let p = crate::gcode::program(g).unwrap();
+        p.segments
+            .iter()
+            .filter(|s| s.kind == crate::gcode::Kind::Feed)
+            .map(|s| s.b)
+            .collect()
+    }
+
+    /// A fitted row written with arcs reads back as the very chords the
+    /// fit checked.
+    #[test]
+    fn arcs_read_back_as_the_checked_chords() {
+        let s = no_dwell();
         for (y, rev) in [(3.0, false), (3.3, true)] {
             let mut pts: Vec<DVec3> = (0..=400)
                 .map(|i| {
@@ -575,17 +592,54 @@ mod arc_tests {
             e.pass(&fitted, &s, 5.0);
             let g = e.finish(&s);
             assert!(g.contains("G18"), "{g}");
-            let p = crate::gcode::program(&g).unwrap();
-            let cut: Vec<DVec3> = p
-                .segments
-                .iter()
-                .filter(|s| s.kind == crate::gcode::Kind::Feed)
-                .map(|s| s.b)
-                .collect();
+            let cut = feeds(&g);
             assert_eq!(cut.len(), fitted.len(), "one chord per fitted point");
             for (a, b) in cut.iter().zip(&fitted) {
                 assert!((*a - *b).length() < 3e-4, "{a} vs {b}");
             }
+        }
+    }
+
+    /// GRBL's chords of an XY arc, level and descending (a ramp along a
+    /// waterline's arc), are written as one G2/G3 each, with Z where it
+    /// changes, and read back as those chords; points that only lie on a
+    /// circle are not.
+    #[test]
+    fn level_and_helical_xy_arcs_are_found() {
+        let s = no_dwell();
+        let arc = Arc {
+            plane: Plane::Xy,
+            clockwise: false,
+            centre: (10.0, 10.0),
+            radius: 4.0,
+        };
+        for dz in [0.0, -0.35] {
+            let from = DVec3::new(14.0, 10.0, -1.0);
+            let to = DVec3::new(10.0, 14.0, -1.0 + dz);
+            let mut pts = vec![from];
+            pts.extend(arc.points(from, to, arc::GRBL_ARC_TOLERANCE));
+            assert!(pts.len() > 10);
+            assert_eq!(
+                arc_run(&pts, 0, arc::GRBL_ARC_TOLERANCE).map(|r| r.0),
+                Some(pts.len() - 1)
+            );
+            let mut e = Emitter::new(&[], &s, false, 0.0);
+            e.arcs = true;
+            e.pass(&pts, &s, 5.0);
+            let g = e.finish(&s);
+            let arcs: Vec<&str> = g.lines().filter(|l| l.starts_with("G3")).collect();
+            assert_eq!(arcs.len(), 1, "{g}");
+            assert_eq!(arcs[0].contains('Z'), dz != 0.0, "{g}");
+            let cut = feeds(&g);
+            // (the feed down onto the first point, then the chords)
+            assert_eq!(cut.len(), pts.len());
+            for (a, b) in cut.iter().zip(&pts) {
+                assert!((*a - *b).length() < 3e-4, "{a} vs {b}");
+            }
+            // uneven steps down are no helix GRBL cuts
+            let mut bent = pts.clone();
+            bent[3].z -= 0.01;
+            assert!(arc_run(&bent, 0, arc::GRBL_ARC_TOLERANCE).is_none_or(|r| r.0 < 3));
         }
     }
 }

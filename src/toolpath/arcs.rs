@@ -13,7 +13,7 @@ use crate::gcode::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
 use glam::DVec3;
 
 /// Fewest dropped points an arc spans (fewer: straight moves do as well).
-const MIN_SPAN: usize = 4;
+pub(super) const MIN_SPAN: usize = 4;
 /// Most dropped points one arc spans (the next arc goes on from there).
 const MAX_SPAN: usize = 256;
 /// Largest arc radius written (mm): flatter runs are straight moves.
@@ -144,34 +144,9 @@ struct Row<'a> {
 
 impl Row<'_> {
     /// The furthest point an arc from `start` (over point a) reaches, and
-    /// its chords: gallop, then bisect.
+    /// its chords.
     fn longest(&self, start: DVec3, a: usize) -> Option<(usize, Vec<DVec3>)> {
-        let n = self.points.len();
-        let mut good: Option<(usize, Vec<DVec3>)> = None;
-        let mut step = MIN_SPAN;
-        let mut bad = n.min(a + MAX_SPAN + 1);
-        while a + step < bad {
-            match self.arc(start, a, a + step) {
-                Some(c) => good = Some((a + step, c)),
-                None => {
-                    bad = a + step;
-                    break;
-                }
-            }
-            step *= 2;
-        }
-        let (mut lo, mut hi) = (good.as_ref()?.0, bad);
-        while hi - lo > 1 {
-            let mid = (lo + hi) / 2;
-            match self.arc(start, a, mid) {
-                Some(c) => {
-                    good = Some((mid, c));
-                    lo = mid;
-                }
-                None => hi = mid,
-            }
-        }
-        good
+        furthest(a, self.points.len(), |e| self.arc(start, a, e))
     }
 
     /// An arc from `start` (over point a) to point e, its end lifted by
@@ -208,16 +183,7 @@ impl Row<'_> {
         // along n) of the circle through start, end and (u, z)
         let bulge = |u: f64, z: f64| {
             let (x, y) = ((u - mu) * tu + (z - mz) * tz, (u - mu) * nu + (z - mz) * nz);
-            if y.abs() < 1e-15 {
-                return 0.0;
-            }
-            let t = (x * x + y * y - half * half) / (2.0 * y);
-            let rho = (half * half + t * t).sqrt();
-            if y > 0.0 {
-                t + rho
-            } else {
-                t - rho
-            }
+            bulge(half, x, y)
         };
         // what GRBL's chords cost on either side, found as we go
         let (mut below, mut above) = (0.0f64, 0.0f64);
@@ -244,6 +210,56 @@ impl Row<'_> {
             }
         }
         None
+    }
+}
+
+/// The furthest end e after a (below n, at most MAX_SPAN on) for which
+/// `arc(e)` gives an arc, and that arc: gallop from MIN_SPAN, then bisect.
+pub(super) fn furthest<T>(
+    a: usize,
+    n: usize,
+    arc: impl Fn(usize) -> Option<T>,
+) -> Option<(usize, T)> {
+    let mut good: Option<(usize, T)> = None;
+    let mut step = MIN_SPAN;
+    let mut bad = n.min(a + MAX_SPAN + 1);
+    while a + step < bad {
+        match arc(a + step) {
+            Some(c) => good = Some((a + step, c)),
+            None => {
+                bad = a + step;
+                break;
+            }
+        }
+        step *= 2;
+    }
+    let (mut lo, mut hi) = (good.as_ref()?.0, bad);
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        match arc(mid) {
+            Some(c) => {
+                good = Some((mid, c));
+                lo = mid;
+            }
+            None => hi = mid,
+        }
+    }
+    good
+}
+
+/// The bulge (height of the arc's middle over the chord) of the circle
+/// through the chord's ends (-half, 0), (half, 0) and (x, y), in the
+/// chord's frame.
+pub(super) fn bulge(half: f64, x: f64, y: f64) -> f64 {
+    if y.abs() < 1e-15 {
+        return 0.0;
+    }
+    let t = (x * x + y * y - half * half) / (2.0 * y);
+    let rho = (half * half + t * t).sqrt();
+    if y > 0.0 {
+        t + rho
+    } else {
+        t - rho
     }
 }
 
@@ -286,10 +302,16 @@ fn chords_of(
         centre,
         radius,
     };
-    let travel = arc.travel(from, to);
+    grbl_chords(&arc, from, to)
+}
+
+/// The points GRBL cuts `arc` from `from` to `to` into (after `from`);
+/// None where its chord count sits at a rounding edge: the emitter rounds
+/// the numbers, and the machine must cut the chords that were checked.
+pub(super) fn grbl_chords(arc: &Arc, from: DVec3, to: DVec3) -> Option<Vec<DVec3>> {
+    let (travel, radius) = (arc.travel(from, to), arc.radius);
     let x = 0.5 * travel.abs() * radius
         / (GRBL_ARC_TOLERANCE * (2.0 * radius - GRBL_ARC_TOLERANCE)).sqrt();
-    // the emitter rounds the numbers: keep clear of a change in the count
     if (x - x.round()).abs() < 0.02 && x > 0.5 {
         return None;
     }

@@ -4,6 +4,7 @@
 
 pub mod along;
 pub mod arcs;
+pub mod contour_arcs;
 pub mod dropcutter;
 pub mod path;
 pub mod pencil;

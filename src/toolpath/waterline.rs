@@ -619,25 +619,15 @@ pub fn parts(c: &Contour, keep: impl Fn(DVec3, f64) -> bool) -> Vec<Contour> {
 /// island) only as far as keeps the CL rise there, penetration times
 /// slope, under `tol / 2`; `clear` then lifts what is left.
 pub fn simplify(c: &Contour, tol: f64) -> Vec<DVec3> {
-    let pts = &c.pts;
+    simplify_points(&c.pts, &c.slope, tol)
+}
+
+/// `simplify` over points and their CL slopes.
+pub fn simplify_points(pts: &[DVec3], slope: &[f64], tol: f64) -> Vec<DVec3> {
     if pts.len() < 3 {
         return pts.to_vec();
     }
-    let fits = |a: usize, e: usize| {
-        let d = (pts[e] - pts[a]).truncate();
-        let len = d.length();
-        if len == 0.0 {
-            return false;
-        }
-        (a + 1..e).all(|k| {
-            let v = (pts[k] - pts[a]).truncate();
-            let side = d.perp_dot(v) / len; // > 0: left of the chord
-            let t = v.dot(d) / (len * len);
-            side.abs() <= tol
-                && (side >= 0.0 || -side * c.slope[k] <= tol / 2.0)
-                && (0.0..=1.0).contains(&t)
-        })
-    };
+    let fits = |a: usize, e: usize| chord_fits(pts, slope, a, e, tol);
     let mut out = vec![pts[0]];
     let mut start = 0;
     let mut k = 2;
@@ -652,19 +642,54 @@ pub fn simplify(c: &Contour, tol: f64) -> Vec<DVec3> {
     out
 }
 
+/// Whether the straight move from point a to point e keeps within the
+/// band of every point between (`simplify`'s): at most `tol` off it on
+/// its free side (the right), and on its material side only as far as
+/// keeps the CL rise there, penetration times slope, under tol / 2.
+pub fn chord_fits(pts: &[DVec3], slope: &[f64], a: usize, e: usize, tol: f64) -> bool {
+    let d = (pts[e] - pts[a]).truncate();
+    let len = d.length();
+    if len == 0.0 {
+        return false;
+    }
+    (a + 1..e).all(|k| {
+        let v = (pts[k] - pts[a]).truncate();
+        let side = d.perp_dot(v) / len; // > 0: left of the chord
+        let t = v.dot(d) / (len * len);
+        side.abs() <= tol
+            && (side >= 0.0 || -side * slope[k] <= tol / 2.0)
+            && (0.0..=1.0).contains(&t)
+    })
+}
+
 /// Lift the ends of every move that would cut a sample by what it would
 /// cut (exact swept tool): a waterline stays one smooth pass, a little
-/// above its level where a chord crossed the material side.
-pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3]) -> Vec<DVec3> {
+/// above its level where a chord crossed the material side. The chords
+/// of one GRBL arc (`arcs`) are lifted together by the most any of them
+/// needs, so that they stay one arc at one height.
+pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3], arcs: bool) -> Vec<DVec3> {
     use super::path::{move_gouge, snap_up};
     if pts.len() < 2 {
         return pts.to_vec();
     }
-    let g: Vec<f64> = pts
+    let mut g: Vec<f64> = pts
         .par_windows(2)
         .map(|w| move_gouge(hf, tool, w[0], w[1], true).max(0.0))
         .collect();
     let n = g.len();
+    if arcs {
+        let mut i = 0;
+        while i < n {
+            match crate::gcode::emit::arc_run(pts, i, crate::gcode::arc::GRBL_ARC_TOLERANCE) {
+                Some((j, _)) => {
+                    let most = g[i..j].iter().cloned().fold(0.0, f64::max);
+                    g[i..j].iter_mut().for_each(|v| *v = most);
+                    i = j;
+                }
+                None => i += 1,
+            }
+        }
+    }
     // a closed loop's ends are one point: it takes both neighbours' lift
     let closed = n > 1 && pts[0] == pts[n];
     let wrap = if closed { g[0].max(g[n - 1]) } else { 0.0 };
