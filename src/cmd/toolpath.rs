@@ -84,10 +84,11 @@ pub struct CutOpts {
     /// Merge collinear points within this distance, mm.
     #[arg(long, default_value_t = 0.005)]
     pub tolerance: f64,
-    /// Arcs: G2/G3 where a circle fits within the tolerance (from 0.006
-    /// mm), for raster rows along X or Y in their vertical plane (G18/G19)
-    /// and for waterlines in XY (G17), as the very chords GRBL cuts them
-    /// into with its default $12 arc tolerance (0.002 mm).
+    /// Arcs: G2/G3 where a circle fits within the tolerance, for
+    /// waterlines in XY (G17) and, from a tolerance of 0.006 mm, for raster
+    /// rows along X or Y in their vertical plane (G18/G19), as the very
+    /// chords GRBL cuts them into with its default $12 arc tolerance
+    /// (0.002 mm).
     #[arg(long, value_enum, default_value_t = OnOff::On)]
     pub arcs: OnOff,
     /// Cutting feed, mm/min [default: the material's, else 1000; within the machine's limit].
