@@ -31,12 +31,15 @@ pub fn fit(pts: &[DVec3], slope: &[f64], tol: f64) -> Vec<DVec3> {
     // the stretch loose..=a is left to straight moves
     let mut loose = 0;
     let mut a = 0;
+    // where the straight move from a ends, when known
+    let mut next: Option<usize> = None;
     while a + MIN_SPAN < n {
         // an arc only where it reaches past two straight moves; else on
         // past the first straight move
-        let l1 = band.straight_end(a);
-        let Some((e, chords)) = band.longest(a).filter(|(e, _)| *e > band.straight_end(l1)) else {
-            a = l1;
+        let l1 = next.take().unwrap_or_else(|| band.straight_end(a));
+        let l2 = band.straight_end(l1);
+        let Some((e, chords)) = band.longest(a).filter(|(e, _)| *e > l2) else {
+            (a, next) = (l1, Some(l2));
             continue;
         };
         if loose < a {
