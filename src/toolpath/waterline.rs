@@ -666,7 +666,7 @@ pub fn chord_fits(pts: &[DVec3], slope: &[f64], a: usize, e: usize, tol: f64) ->
 /// cut (exact swept tool): a waterline stays one smooth pass, a little
 /// above its level where a chord crossed the material side. The chords
 /// of one GRBL arc (`arcs`) are lifted together by the most any of them
-/// needs, so that they stay one arc at one height.
+/// or the moves beside it need, so that they stay one arc at one height.
 pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3], arcs: bool) -> Vec<DVec3> {
     use super::path::{move_gouge, snap_up};
     if pts.len() < 2 {
@@ -677,21 +677,51 @@ pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3], arcs: bool) -> Vec<DV
         .map(|w| move_gouge(hf, tool, w[0], w[1], true).max(0.0))
         .collect();
     let n = g.len();
+    // a closed loop's ends are one point: it takes both neighbours' lift
+    let closed = n > 1 && pts[0] == pts[n];
     if arcs {
+        // an arc's chords (moves i..j) share the lift of its ends too, which
+        // the moves beside it set; neighbouring arcs settle in a few rounds
+        let mut runs = Vec::new();
         let mut i = 0;
         while i < n {
             match crate::gcode::emit::arc_run(pts, i, crate::gcode::arc::GRBL_ARC_TOLERANCE) {
                 Some((j, _)) => {
-                    let most = g[i..j].iter().cloned().fold(0.0, f64::max);
-                    g[i..j].iter_mut().for_each(|v| *v = most);
+                    runs.push((i, j));
                     i = j;
                 }
                 None => i += 1,
             }
         }
+        for _ in 0..4 {
+            let mut moved = false;
+            for &(i, j) in &runs {
+                let before = if i > 0 {
+                    Some(g[i - 1])
+                } else {
+                    closed.then(|| g[n - 1])
+                };
+                let after = if j < n {
+                    Some(g[j])
+                } else {
+                    closed.then(|| g[0])
+                };
+                let most = g[i..j]
+                    .iter()
+                    .chain(before.iter())
+                    .chain(after.iter())
+                    .cloned()
+                    .fold(0.0, f64::max);
+                if g[i..j].iter().any(|v| *v != most) {
+                    g[i..j].iter_mut().for_each(|v| *v = most);
+                    moved = true;
+                }
+            }
+            if !moved {
+                break;
+            }
+        }
     }
-    // a closed loop's ends are one point: it takes both neighbours' lift
-    let closed = n > 1 && pts[0] == pts[n];
     let wrap = if closed { g[0].max(g[n - 1]) } else { 0.0 };
     pts.iter()
         .enumerate()
@@ -800,6 +830,39 @@ mod tests {
             .map(|w| w[0].x * w[1].y - w[1].x * w[0].y)
             .sum();
         assert!(a > 0.0, "signed area {a}");
+    }
+
+    /// An arc's chords are lifted as one, by the deepest cut of its own
+    /// chords and of the moves beside it, so it stays one arc.
+    #[test]
+    fn clear_lifts_an_arc_as_one() {
+        use crate::gcode::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
+        use crate::gcode::emit::arc_run;
+        let hf = HeightField::new(Grid::new(60, 60, 0.0), 0.25);
+        let tool = Tool::parse("ball:2").unwrap();
+        let arc = Arc {
+            plane: Plane::Xy,
+            clockwise: false,
+            centre: (7.5, 7.5),
+            radius: 4.0,
+        };
+        let (from, to) = (DVec3::new(11.5, 7.5, -0.001), DVec3::new(7.5, 11.5, -0.001));
+        // a move cutting 3 um into the arc's start, the arc 1 um deep
+        let mut pts = vec![DVec3::new(11.5, 3.5, -0.003), from];
+        pts.extend(arc.points(from, to, GRBL_ARC_TOLERANCE));
+        assert!(arc_run(&pts, 1, GRBL_ARC_TOLERANCE).is_some_and(|r| r.0 == pts.len() - 1));
+        let lifted = clear(&hf, &tool, &pts, true);
+        assert!(lifted[1..]
+            .iter()
+            .all(|p| p.z >= 0.0019 && p.z == lifted[1].z));
+        let run = arc_run(&lifted, 1, GRBL_ARC_TOLERANCE);
+        assert!(
+            run.is_some_and(|r| r.0 == pts.len() - 1),
+            "the arc is broken"
+        );
+        // without arcs each point takes its own moves' lift
+        let each = clear(&hf, &tool, &pts, false);
+        assert!(each[2].z < each[1].z);
     }
 
     /// Around a pocket (material outside) chords may stray away from the
