@@ -444,6 +444,23 @@ pub fn arc_run(pts: &[DVec3], i: usize, tol: f64) -> Option<(usize, Arc)> {
     None
 }
 
+/// Every maximal run of GRBL arc chords in `pts` (`arc_run`), as the
+/// indices (i, j) of its first and last point.
+pub fn arc_runs(pts: &[DVec3]) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    let mut i = 0;
+    while i + 1 < pts.len() {
+        match arc_run(pts, i, arc::GRBL_ARC_TOLERANCE) {
+            Some((j, _)) => {
+                runs.push((i, j));
+                i = j;
+            }
+            None => i += 1,
+        }
+    }
+    runs
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

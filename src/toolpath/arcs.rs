@@ -375,7 +375,6 @@ fn band_error(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gcode::arc;
 
     /// A row over a bump and a dip, dense as dropped points.
     fn row(y: f64) -> Vec<DVec3> {
@@ -420,14 +419,8 @@ mod tests {
 
     /// Moves the emitter would write: maximal runs of GRBL chords count once.
     fn runs_of(pts: &[DVec3]) -> usize {
-        let mut moves = 0;
-        let mut i = 0;
-        while i + 1 < pts.len() {
-            let j = crate::gcode::emit::arc_run(pts, i, arc::GRBL_ARC_TOLERANCE)
-                .map_or(i + 1, |(j, _)| j);
-            moves += 1;
-            i = j;
-        }
-        moves
+        let runs = crate::gcode::emit::arc_runs(pts);
+        let chords: usize = runs.iter().map(|(i, j)| j - i).sum();
+        pts.len() - 1 - chords + runs.len()
     }
 }

@@ -10,7 +10,7 @@
 //! only as far as keeps the CL rise there under tol / 2 (`chord_fits`).
 
 use super::arcs::{bulge, furthest, grbl_chords, MAX_RADIUS, MIN_SPAN};
-use super::waterline::{chord_fits, simplify_points};
+use super::waterline::{chord_fits, material_allowance, simplify_points};
 use crate::gcode::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
 use glam::{DVec2, DVec3};
 
@@ -67,12 +67,7 @@ struct Band<'a> {
 impl Band<'_> {
     /// How far a move may pass on the material side of point k.
     fn allowance(&self, k: usize) -> f64 {
-        let s = self.slope[k];
-        if s > 0.5 {
-            self.tol / (2.0 * s)
-        } else {
-            self.tol
-        }
+        material_allowance(self.slope[k], self.tol)
     }
 
     /// The furthest point one straight move from point a reaches.
@@ -207,7 +202,7 @@ impl Band<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gcode::emit::arc_run;
+    use crate::gcode::emit::arc_runs;
 
     /// An island's contour (material inside, counter-clockwise) and a
     /// pocket's (clockwise), an ellipse with a wobble, dense as placed.
@@ -222,21 +217,12 @@ mod tests {
             .collect()
     }
 
-    /// Moves the emitter would write: maximal runs of GRBL chords count
-    /// once.
+    /// Moves the emitter would write (maximal runs of GRBL chords count
+    /// once), and how many are arcs.
     fn moves(pts: &[DVec3]) -> (usize, usize) {
-        let (mut moves, mut arcs, mut i) = (0, 0, 0);
-        while i + 1 < pts.len() {
-            match arc_run(pts, i, GRBL_ARC_TOLERANCE) {
-                Some((j, _)) => {
-                    arcs += 1;
-                    i = j;
-                }
-                None => i += 1,
-            }
-            moves += 1;
-        }
-        (moves, arcs)
+        let runs = arc_runs(pts);
+        let chords: usize = runs.iter().map(|(i, j)| j - i).sum();
+        (pts.len() - 1 - chords + runs.len(), runs.len())
     }
 
     #[test]

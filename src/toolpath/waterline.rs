@@ -656,10 +656,19 @@ pub fn chord_fits(pts: &[DVec3], slope: &[f64], a: usize, e: usize, tol: f64) ->
         let v = (pts[k] - pts[a]).truncate();
         let side = d.perp_dot(v) / len; // > 0: left of the chord
         let t = v.dot(d) / (len * len);
-        side.abs() <= tol
-            && (side >= 0.0 || -side * slope[k] <= tol / 2.0)
-            && (0.0..=1.0).contains(&t)
+        side <= tol && side >= -material_allowance(slope[k], tol) && (0.0..=1.0).contains(&t)
     })
+}
+
+/// How far a move may pass a contour point on its material side: as far
+/// as keeps the CL rise there, penetration times slope, under tol / 2,
+/// and never more than `tol`.
+pub fn material_allowance(slope: f64, tol: f64) -> f64 {
+    if slope > 0.5 {
+        tol / (2.0 * slope)
+    } else {
+        tol
+    }
 }
 
 /// Lift the ends of every move that would cut a sample by what it would
@@ -682,17 +691,7 @@ pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3], arcs: bool) -> Vec<DV
     if arcs {
         // an arc's chords (moves i..j) share the lift of its ends too, which
         // the moves beside it set; neighbouring arcs settle in a few rounds
-        let mut runs = Vec::new();
-        let mut i = 0;
-        while i < n {
-            match crate::gcode::emit::arc_run(pts, i, crate::gcode::arc::GRBL_ARC_TOLERANCE) {
-                Some((j, _)) => {
-                    runs.push((i, j));
-                    i = j;
-                }
-                None => i += 1,
-            }
-        }
+        let runs = crate::gcode::emit::arc_runs(pts);
         for _ in 0..4 {
             let mut moved = false;
             for &(i, j) in &runs {
