@@ -65,6 +65,30 @@ fn default_jobs_stay_within_the_depth_of_cut_and_never_plunge() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// Steep walls: the demo with a flat field and 0.5 mm steps (outline walls
+/// the raster runs down) and its roughing at the panel's edge. A surface
+/// pass down a wall in steps just over 45 degrees used to be cut into
+/// one-point pieces, each entered straight down from above (33 plunges at
+/// 200 px), and a clearing pass at the foot of a steep rise was ramped
+/// into down that rise.
+#[test]
+fn steep_walls_are_not_entered_by_plunging() {
+    let d = scratch("safe-walls");
+    let (_, rep) = carve_judged(
+        &d,
+        &["--resolution", "200", "--flat-background", "--steps", "0.5"],
+    );
+    let e = &rep["engagement"];
+    assert!(
+        e["plunges"].as_array().unwrap().is_empty(),
+        "{}",
+        e["plunges"]
+    );
+    assert!(rep["rapids_in_stock"].as_array().unwrap().is_empty());
+    assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// A coarse relief (the 48 px demo, 60 mm wide, 3 mm deep: 1.25 mm
 /// samples) is judged as `simulate` sees it with its default fine cells:
 /// no tool cuts deeper than the material allows, and the job's own

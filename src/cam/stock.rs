@@ -106,12 +106,48 @@ impl Planned {
         for p in passes {
             let mut from = 0;
             let clear_z = p.clear_z;
+            let pass_start = out.len();
             while from < p.pts.len() {
                 let split = self.steep_drop(&p.pts[from..], r).map(|i| from + i);
                 let to = split.unwrap_or(p.pts.len());
                 let mut piece = p.pts[from..to].to_vec();
+                let in_material = |q: DVec3| self.would_cut(q.x, q.y, q.z, &tool) > 0.005;
+                // a surface piece between two steep drops too short to ramp
+                // along would be entered straight down from above: the drop
+                // that leads to it is the gentler way in, so it stays
+                let xy_len: f64 = piece
+                    .windows(2)
+                    .map(|w| (w[1] - w[0]).truncate().length())
+                    .sum();
+                if surface
+                    && from > 0
+                    && out.len() > pass_start
+                    && xy_len < 0.25 * r
+                    && in_material(piece[0])
+                {
+                    let prev = out.last_mut().unwrap();
+                    let mut way = vec![*prev.pts.last().unwrap()];
+                    way.extend_from_slice(&piece);
+                    self.cut(&way, tool);
+                    prev.pts.extend(piece);
+                    from = to;
+                    continue;
+                }
+                // a clearing piece that starts in material at the foot of a
+                // steep rise can be entered only by going down the rise:
+                // its foot is left to later passes
+                if !surface {
+                    let foot = (0..piece.len() - 1)
+                        .take_while(|&i| path::rises_steeply(&piece, i) && in_material(piece[i]))
+                        .count();
+                    piece.drain(..foot);
+                    if piece.len() < 2 {
+                        from = to;
+                        continue;
+                    }
+                }
                 let first = piece[0];
-                if self.would_cut(first.x, first.y, first.z, &tool) > 0.005 {
+                if in_material(first) {
                     let top = self.highest(first.x, first.y, r);
                     // start a hair above the material
                     let start = path::snap_up(top + 0.05).min(clear_z.max(top + 0.05));
@@ -155,7 +191,8 @@ impl Planned {
             .fold(a.z.max(b.z), f64::max)
     }
 
-    /// The first point of `pts` reached by a drop steeper than 45 degrees
+    /// The first point of `pts` reached by a drop of 45 degrees or more (a
+    /// G-code unit of margin: the simulator reads the written numbers)
     /// that ends in material (more than a scallop under the tool's axis,
     /// within a quarter radius as the simulator judges it, and a cell
     /// more: the rim of a neighbouring row's cut can fall between these
@@ -166,7 +203,7 @@ impl Planned {
             let (a, b) = (pts[i - 1], pts[i]);
             let drop = a.z - b.z;
             drop > 0.05
-                && drop > (b - a).truncate().length()
+                && drop > (b - a).truncate().length() - path::GRID
                 && self.highest(b.x, b.y, near) - b.z > crate::sim::engage::PLUNGE_SKIN as f64
         })
     }
@@ -197,5 +234,79 @@ impl Planned {
                 most
             })
             .reduce(|| 0.0, f64::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn planned() -> Planned {
+        Planned::new(Stock {
+            x0: -2.0,
+            y0: 0.0,
+            width: 14.0,
+            height: 10.0,
+            thickness: 6.0,
+            pitch: 0.05,
+        })
+    }
+
+    /// The steepest descent of a pass: drop over horizontal run.
+    fn steepest_descent(p: &Pass) -> f64 {
+        p.pts
+            .windows(2)
+            .map(|w| (w[0].z - w[1].z) / (w[1] - w[0]).truncate().length().max(1e-9))
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// A clearing pass that starts in material at the foot of a steep rise
+    /// (the CL drop at a panel edge): the ramp's return legs would run down
+    /// the rise, so the foot is left out and the ramp keeps to the gentle
+    /// stretch after it.
+    #[test]
+    fn a_clearing_pass_is_not_entered_down_a_steep_rise() {
+        let tool = Tool::parse("flat:3.175").unwrap();
+        let y = 5.0;
+        let mut pts = vec![DVec3::new(0.0, y, -2.1), DVec3::new(0.2, y, -1.9)];
+        pts.extend((1..=40).map(|i| DVec3::new(0.2 + 0.25 * i as f64, y, -1.9)));
+        let out = planned().ramp_and_cut(vec![Pass { pts, clear_z: 5.0 }], tool, false);
+        assert_eq!(out.len(), 1);
+        assert!(out[0].pts.iter().all(|p| p.x > 0.1), "the foot was cut");
+        let s = steepest_descent(&out[0]);
+        assert!(
+            s <= path::RAMP_DEG.to_radians().tan() * 1.01,
+            "descends at {s}"
+        );
+    }
+
+    /// A surface pass down a wall in steps just over 45 degrees: each step
+    /// is a steep drop into material, and the piece after each is too short
+    /// to ramp along. The pass keeps to the wall instead of being cut into
+    /// one-point pieces entered straight down from above.
+    #[test]
+    fn a_surface_pass_down_a_wall_is_not_cut_into_plunges() {
+        let tool = Tool::parse("ball:3.175").unwrap();
+        let y = 5.0;
+        let mut pts: Vec<DVec3> = (0..=20)
+            .map(|i| DVec3::new(0.25 * i as f64, y, -0.5))
+            .collect();
+        pts.extend((1..=8).map(|i| DVec3::new(5.0 + 0.1 * i as f64, y, -0.5 - 0.11 * i as f64)));
+        pts.extend((1..=20).map(|i| DVec3::new(5.8 + 0.25 * i as f64, y, -1.38)));
+        let out = planned().ramp_and_cut(vec![Pass { pts, clear_z: 5.0 }], tool, true);
+        for p in &out {
+            for w in p.pts.windows(2) {
+                let vertical = (w[1] - w[0]).truncate().length() < 1e-9 && w[1].z < w[0].z;
+                assert!(
+                    !vertical || p.pts[0] == w[0],
+                    "a plunge inside a pass at {}",
+                    w[1]
+                );
+            }
+            // a piece is entered by a ramp, never by a plunge to a lone point
+            assert!(p.pts.len() > 2, "a one-point piece at {}", p.pts[0]);
+        }
+        assert!(out.len() <= 2, "{} pieces", out.len());
+        assert!(steepest_descent(&out[0]) <= 1.2);
     }
 }

@@ -55,7 +55,9 @@ pub struct ReliefOpts {
     /// Compression strength: C(x) = ln(1 + alpha x) / alpha [default: from --material, else 4].
     #[arg(long, allow_negative_numbers = true)]
     pub alpha: Option<f64>,
-    /// Silhouette threshold: a slope (scene depth per image width) above which an edge is an outline.
+    /// Outline threshold, in slope units (scene depth per image width). Meshes: the largest depth
+    /// mismatch between two samples' surfaces that still counts as one continuous surface (a steep
+    /// surface is not an outline); depth and normal-map PNGs: the slope above which an edge is one.
     #[arg(long, default_value_t = 8.0, allow_negative_numbers = true)]
     pub silhouette: f64,
     /// Trace every outline with a constant step of this height (mm).

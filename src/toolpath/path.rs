@@ -1069,11 +1069,20 @@ pub fn travel_height(hf: &HeightField, tool: &Tool, lift: f64, a: DVec3, b: DVec
         .fold(a.z.max(b.z), f64::max)
 }
 
+/// Whether the move from `pts[i]` rises at 45 degrees or more (within a
+/// G-code unit): run backwards, as a ramp's return legs run, it would be
+/// a plunge.
+pub fn rises_steeply(pts: &[DVec3], i: usize) -> bool {
+    let (a, b) = (pts[i], pts[i + 1]);
+    b.z - a.z > 0.05 && b.z - a.z > (b - a).truncate().length() - GRID
+}
+
 /// Enter the pass at `top` (the material's top there) by ramping back and
 /// forth along its first stretch at RAMP_DEG instead of plunging, never
-/// below the pass itself. A short first stretch takes more legs (at most
-/// RAMP_LEGS, steeper beyond that); only a pass shorter than a quarter of
-/// the radius plunges.
+/// below the pass itself. The stretch ends before the pass first rises
+/// steeply, which the return legs would run down. A short first stretch
+/// takes more legs (at most RAMP_LEGS, steeper beyond that); only a pass
+/// whose stretch is shorter than a quarter of the radius plunges.
 pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
     // where the pass steps straight up or down (a corner over a sample, or
     // a move raised by the check), the ramp keeps to the higher side:
@@ -1088,7 +1097,7 @@ pub fn ramp(pts: &[DVec3], top: f64, r: f64) -> Vec<DVec3> {
     let depth = top - pts[0].z;
     let mut len = 0.0;
     let mut m = 0;
-    while m + 1 < pts.len() && len < 4.0 * r {
+    while m + 1 < pts.len() && len < 4.0 * r && !rises_steeply(pts, m) {
         len += (pts[m + 1] - pts[m]).truncate().length();
         m += 1;
     }
