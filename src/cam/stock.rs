@@ -115,14 +115,15 @@ impl Planned {
                 // a surface piece between two steep drops too short to ramp
                 // along would be entered straight down from above: the drop
                 // that leads to it is the gentler way in, so it stays
-                let xy_len: f64 = piece
-                    .windows(2)
-                    .map(|w| (w[1] - w[0]).truncate().length())
-                    .sum();
+                let xy_len = |pts: &[DVec3]| -> f64 {
+                    pts.windows(2)
+                        .map(|w| (w[1] - w[0]).truncate().length())
+                        .sum()
+                };
                 if surface
                     && from > 0
                     && out.len() > pass_start
-                    && xy_len < 0.25 * r
+                    && xy_len(&piece) < 0.25 * r
                     && in_material(piece[0])
                 {
                     let prev = out.last_mut().unwrap();
@@ -191,8 +192,7 @@ impl Planned {
             .fold(a.z.max(b.z), f64::max)
     }
 
-    /// The first point of `pts` reached by a drop of 45 degrees or more (a
-    /// G-code unit of margin: the simulator reads the written numbers)
+    /// The first point of `pts` reached by a steep drop (`path::steep`)
     /// that ends in material (more than a scallop under the tool's axis,
     /// within a quarter radius as the simulator judges it, and a cell
     /// more: the rim of a neighbouring row's cut can fall between these
@@ -201,9 +201,7 @@ impl Planned {
         let near = r / 4.0 + self.stock.pitch;
         (1..pts.len()).find(|&i| {
             let (a, b) = (pts[i - 1], pts[i]);
-            let drop = a.z - b.z;
-            drop > 0.05
-                && drop > (b - a).truncate().length() - path::GRID
+            path::steep(b, a)
                 && self.highest(b.x, b.y, near) - b.z > crate::sim::engage::PLUNGE_SKIN as f64
         })
     }

@@ -1069,12 +1069,18 @@ pub fn travel_height(hf: &HeightField, tool: &Tool, lift: f64, a: DVec3, b: DVec
         .fold(a.z.max(b.z), f64::max)
 }
 
-/// Whether the move from `pts[i]` rises at 45 degrees or more (within a
-/// G-code unit): run backwards, as a ramp's return legs run, it would be
-/// a plunge.
+/// Whether the way from `low` up to `high` is 45 degrees or steeper (a
+/// G-code unit of margin: the simulator judges the written numbers) and
+/// more than a hair tall: gone down, it is a plunge.
+pub fn steep(low: DVec3, high: DVec3) -> bool {
+    let rise = high.z - low.z;
+    rise > 0.05 && rise > (high - low).truncate().length() - GRID
+}
+
+/// Whether the move from `pts[i]` rises steeply (`steep`): run backwards,
+/// as a ramp's return legs run, it would be a plunge.
 pub fn rises_steeply(pts: &[DVec3], i: usize) -> bool {
-    let (a, b) = (pts[i], pts[i + 1]);
-    b.z - a.z > 0.05 && b.z - a.z > (b - a).truncate().length() - GRID
+    steep(pts[i], pts[i + 1])
 }
 
 /// Enter the pass at `top` (the material's top there) by ramping back and
