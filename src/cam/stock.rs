@@ -158,12 +158,14 @@ impl Planned {
                         continue;
                     }
                 }
-                // travel from the last pass no higher than the material
-                // under the way (and a millimetre) needs
+                // travel from the last pass as high as the material under
+                // the way (and a millimetre) needs: the pass's own
+                // clearance was reckoned for the way from where its
+                // operation left off, which a split, a dropped foot or a
+                // skipped piece before it changes (and over material that
+                // only this plan knows is still there)
                 let travel = match out.last().and_then(|q| q.pts.last()) {
-                    Some(&end) => {
-                        clear_z.min(self.over_the_way(end, piece[0], r) + TRAVEL_CLEARANCE)
-                    }
+                    Some(&end) => self.over_the_way(end, piece[0], r) + TRAVEL_CLEARANCE,
                     None => clear_z,
                 };
                 self.cut(&piece, tool);
@@ -180,14 +182,16 @@ impl Planned {
     }
 
     /// The highest material within `r` of the straight way from `a` to
-    /// `b` (XY), sampled half a radius apart; at least both ends' Z.
+    /// `b` (XY), at least both ends' Z: sampled at most half a radius
+    /// apart, each sample over r sqrt(1 + 1/16), which covers every point
+    /// within r of the way.
     fn over_the_way(&self, a: DVec3, b: DVec3, r: f64) -> f64 {
         let len = (b - a).truncate().length();
         let n = (len / (0.5 * r)).ceil() as usize + 1;
         (0..=n)
             .map(|k| {
                 let p = a + (b - a) * (k as f64 / n as f64);
-                self.highest(p.x, p.y, r)
+                self.highest(p.x, p.y, r * (1.0f64 + 1.0 / 16.0).sqrt())
             })
             .fold(a.z.max(b.z), f64::max)
     }
@@ -256,6 +260,43 @@ mod tests {
             .windows(2)
             .map(|w| (w[0].z - w[1].z) / (w[1] - w[0]).truncate().length().max(1e-9))
             .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// A pass's own clearance height is reckoned by its operation for the
+    /// way from where that operation left off; the travel the plan makes
+    /// can run elsewhere (here over stock no pass has cut, between two
+    /// channels), and must clear what the plan knows is there.
+    #[test]
+    fn travels_clear_the_planned_stock_not_the_pass_s_own_height() {
+        let tool = Tool::parse("flat:3.175").unwrap();
+        let row = |y: f64, rev: bool| {
+            let mut pts: Vec<DVec3> = (0..=40)
+                .map(|i| DVec3::new(0.25 * i as f64, y, -1.0))
+                .collect();
+            if rev {
+                pts.reverse();
+            }
+            pts
+        };
+        let passes = vec![
+            Pass {
+                pts: row(2.0, false),
+                clear_z: 5.0,
+            },
+            // as low as a layer's travel over its own cleared level
+            Pass {
+                pts: row(8.0, true),
+                clear_z: -0.5,
+            },
+        ];
+        let out = planned().ramp_and_cut(passes, tool, false);
+        assert_eq!(out.len(), 2);
+        // the stock top (0) stands between the channels
+        assert!(
+            out[1].clear_z >= TRAVEL_CLEARANCE - 1e-9,
+            "travels at {}",
+            out[1].clear_z
+        );
     }
 
     /// A clearing pass that starts in material at the foot of a steep rise
