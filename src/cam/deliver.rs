@@ -81,6 +81,7 @@ impl ToolpathJob {
             };
         }
         let n_rough = ops.iter().take_while(|o| o.title == "roughing").count();
+        let rough_tool = (n_rough > 0).then(|| ops[0].tool);
         let mut header_notes = notes.clone();
         if let Some(p) = pad {
             header_notes.push(format!(
@@ -156,7 +157,19 @@ impl ToolpathJob {
                 o.limit,
                 limits.name
             );
-            bail!("{what}: rough first (--rough), lower --step-down, or pass --allow-deep-cuts");
+            let advice = match rough_tool {
+                // roughing is there: the spot is one it cannot reach (a
+                // channel or corner narrower than its tool) and the
+                // finishing tool's own layers cannot be entered
+                Some(rt) if rt != o.tool => format!(
+                    "{} cannot reach there, nor can the finishing tool's layers be entered: \
+                     rough with a smaller tool (--rough flat:D), or pass --allow-deep-cuts",
+                    rt.spec()
+                ),
+                Some(_) => "lower --step-down, or pass --allow-deep-cuts".into(),
+                None => "rough first (--rough), lower --step-down, or pass --allow-deep-cuts".into(),
+            };
+            bail!("{what}: {advice}");
         }
         if self.finish == Finish::Waterline {
             notes.push(format!(
