@@ -167,7 +167,9 @@ impl ToolpathJob {
                     rt.spec()
                 ),
                 Some(_) => "lower --step-down, or pass --allow-deep-cuts".into(),
-                None => "rough first (--rough), lower --step-down, or pass --allow-deep-cuts".into(),
+                None => {
+                    "rough first (--rough), lower --step-down, or pass --allow-deep-cuts".into()
+                }
             };
             bail!("{what}: {advice}");
         }
