@@ -152,15 +152,8 @@ impl Planned {
                     let top = self.highest(first.x, first.y, r);
                     // start a hair above the material
                     let start = path::snap_up(top + 0.05).min(clear_z.max(top + 0.05));
-                    let ramped = path::ramp(&piece, start, r);
-                    if ramped[0].z >= start - 1e-9 {
-                        piece = ramped;
-                    } else if let Some(q) = self.side_entry(&piece, &tool) {
-                        // too short to ramp along, but open to the side
-                        piece.insert(0, q);
-                    } else if surface {
-                        piece = ramped;
-                    } else {
+                    piece = path::ramp(&piece, start, r);
+                    if piece[0].z < start - 1e-9 && !surface {
                         from = to;
                         continue;
                     }
@@ -186,29 +179,6 @@ impl Planned {
             }
         }
         out
-    }
-
-    /// Where a piece starting in material can be entered level from the
-    /// side instead: the nearest point back along its first move, at its
-    /// height, at which the tool meets no material (past the stock's edge
-    /// or in a cleared pocket), at most 1.1 radius off. A narrow channel
-    /// open to the stock's edge is too short to ramp along, and a plunge
-    /// into it would cut its whole depth at once. The job's X0 Y0 is the
-    /// stock's lower-left corner at the lowest: the entry never goes below
-    /// it (nor off a machine set up at its home corner).
-    fn side_entry(&self, piece: &[DVec3], tool: &Tool) -> Option<DVec3> {
-        let a = piece[0];
-        let d = (*piece.get(1)? - a).truncate();
-        if d.length() == 0.0 {
-            return None;
-        }
-        let u = d.normalize().extend(0.0);
-        let r = tool.radius();
-        (1..=11)
-            .map(|k| a - u * (0.1 * k as f64 * r))
-            .map(|q| DVec3::new(path::snap(q.x), path::snap(q.y), q.z))
-            .filter(|q| q.x >= self.stock.x0 && q.y >= self.stock.y0)
-            .find(|q| self.would_cut(q.x, q.y, q.z, tool) <= 0.005)
     }
 
     /// The highest material within `r` of the straight way from `a` to
@@ -327,26 +297,6 @@ mod tests {
             "travels at {}",
             out[1].clear_z
         );
-    }
-
-    /// A clearing piece in a channel open to the stock's edge, too short to
-    /// ramp along: entered level from past the edge, not skipped (which
-    /// left the channel's whole depth to the finish) nor plunged.
-    #[test]
-    fn a_piece_too_short_to_ramp_is_entered_from_the_open_side() {
-        let tool = Tool::parse("ball:3.175").unwrap();
-        let pts = vec![DVec3::new(12.0, 5.0, -1.0), DVec3::new(11.8, 5.0, -1.0)];
-        let out = planned().ramp_and_cut(vec![Pass { pts, clear_z: 5.0 }], tool, false);
-        assert_eq!(out.len(), 1, "the piece was left out");
-        let p = &out[0].pts;
-        let at = p[0];
-        assert!(at.x > 12.0, "entered at {at:?}");
-        assert!(planned().would_cut(at.x, at.y, at.z, &tool) <= 0.005);
-        assert!(p.iter().all(|q| q.z == -1.0), "not level: {p:?}");
-        // never past the stock's lower-left corner (the job's X0 Y0)
-        let pts = vec![DVec3::new(-2.0, 5.0, -1.0), DVec3::new(-1.8, 5.0, -1.0)];
-        let out = planned().ramp_and_cut(vec![Pass { pts, clear_z: 5.0 }], tool, false);
-        assert!(out.iter().all(|o| o.pts.iter().all(|q| q.x >= -2.0)));
     }
 
     /// A clearing pass that starts in material at the foot of a steep rise
