@@ -57,8 +57,8 @@ impl ToolpathJob {
             .checked(hf, tool, passes)
             .into_iter()
             .map(|p| Pass {
-                // the layers' own travels go over the relief, not over
-                // material earlier operations left: travel at safe Z
+                // the first travel comes from wherever the operation
+                // before left off: at safe Z (the stock plan sets the rest)
                 clear_z: s.safe_z,
                 ..p
             })

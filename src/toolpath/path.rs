@@ -1056,19 +1056,6 @@ fn lift_cuts(pts: &[DVec3], gouges: Vec<f64>) -> Vec<DVec3> {
     out
 }
 
-/// The highest point of the CL surface of `tool` raised by `lift` on the
-/// straight line a -> b, and a and b themselves: a travel at or above it
-/// touches nothing the surface reaches.
-pub fn travel_height(hf: &HeightField, tool: &Tool, lift: f64, a: DVec3, b: DVec3) -> f64 {
-    let n = ((b - a).truncate().length() / hf.pitch).ceil() as usize + 1;
-    (0..=n)
-        .map(|i| {
-            let q = a + (b - a) * (i as f64 / n as f64);
-            hf.drop(tool, q.x, q.y).map_or(f64::MIN, |z| z + lift)
-        })
-        .fold(a.z.max(b.z), f64::max)
-}
-
 /// Whether the way from `low` up to `high` is 45 degrees or steeper (a
 /// G-code unit of margin: the simulator judges the written numbers) and
 /// more than a hair tall: gone down, it is a plunge.

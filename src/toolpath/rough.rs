@@ -18,7 +18,10 @@ use crate::tool::Tool;
 use glam::DVec3;
 use rayon::prelude::*;
 
-/// Height above the (known upper bound of) material for travels, mm.
+/// Each pass's own clearance: this far over the stock top (Z0), mm. The
+/// job's stock plan (`cam::stock::Planned`) sets the travels between
+/// passes from the material it knows is left, so nothing lower is
+/// reckoned here.
 const CLEARANCE: f64 = 1.0;
 
 pub struct Params<'a> {
@@ -140,7 +143,6 @@ pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
     let mut out = Vec::new();
     for k in 0..n as isize {
         let (z, above) = (layer(k), layer(k - 1));
-        let mut prev_end: Option<DVec3> = None;
         for (r, row) in cl.iter().enumerate() {
             // material remains where the surface is below the last layer
             let active: Vec<bool> = row
@@ -183,15 +185,10 @@ pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
                     }
                     None => above.max(pts[0].z),
                 };
-                let clear = match prev_end {
-                    Some(e) => super::path::travel_height(hf, &big, stl, e, pts[0]).max(above),
-                    None => 0.0,
-                } + CLEARANCE;
-                prev_end = pts.last().copied();
                 let pts = super::path::ramp(&pts, top, p.tool.radius());
                 out.push(Pass {
                     pts,
-                    clear_z: clear,
+                    clear_z: CLEARANCE,
                 });
             }
         }
