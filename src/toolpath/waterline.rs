@@ -327,21 +327,15 @@ pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
 /// (`crossing`): done after `parts`, so that stretches left to the raster
 /// cost no search.
 pub fn place(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour {
-    let mut near = Near::default();
+    // in runs along the contour, so that one long contour (the outline at
+    // a low level) is not left to one thread
     let pts = c
         .pts
-        .iter()
+        .par_iter()
         .zip(&c.pending)
-        .map(|(p, cr)| match cr {
-            Some(cr) => crossing(
-                hf,
-                tool,
-                floor,
-                p.z,
-                (cr.lo, cr.z.0),
-                (cr.hi, cr.z.1),
-                &mut near,
-            ),
+        .with_min_len(RUN)
+        .map_init(Near::default, |near, (p, cr)| match cr {
+            Some(cr) => crossing(hf, tool, floor, p.z, (cr.lo, cr.z.0), (cr.hi, cr.z.1), near),
             None => *p,
         })
         .collect();
@@ -454,46 +448,17 @@ pub struct Near {
 pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour {
     let level = c.pts[0].z;
     let cl = |x: f64, y: f64| hf.drop(tool, x, y).unwrap_or(floor).max(floor);
+    // each move on its own, in runs (as `place`)
+    let split: Vec<(Vec<DVec3>, Vec<f64>)> = (1..c.pts.len())
+        .into_par_iter()
+        .with_min_len(RUN)
+        .map(|k| refine_move(hf, tool, floor, level, &cl, c, k))
+        .collect();
     let mut pts = vec![c.pts[0]];
     let mut slope = vec![c.slope[0]];
-    for k in 1..c.pts.len() {
-        let mut todo = vec![(c.pts[k - 1], c.pts[k], 0)];
-        while let Some((a, b, depth)) = todo.pop() {
-            let d = (b - a).truncate();
-            let len = d.length();
-            // the drop-cutter's probes alone decide a split (the exact
-            // sweep over the samples is `clear`'s, once thinned): the
-            // highest CL point along the chord, if it rises past the dip
-            let peak = if depth < 12 && len > 1e-3 {
-                peak(hf, tool, &cl, a, b)
-            } else {
-                None
-            };
-            if let Some((top, at)) = peak {
-                let right = glam::DVec2::new(d.y, -d.x) / len;
-                let out = [1.0, 0.5, 0.25, 0.125]
-                    .map(|f| at.truncate() + right * len * f)
-                    .into_iter()
-                    .map(|o| (o, cl(o.x, o.y)))
-                    .find(|o| o.1 < level);
-                if let Some((out, zo)) = out {
-                    let q = crossing(
-                        hf,
-                        tool,
-                        floor,
-                        level,
-                        ((out.x, out.y), zo),
-                        ((at.x, at.y), top),
-                        &mut Near::default(),
-                    );
-                    todo.push((q, b, depth + 1));
-                    todo.push((a, q, depth + 1));
-                    continue;
-                }
-            }
-            pts.push(b);
-            slope.push(c.slope[k]);
-        }
+    for (p, s) in split {
+        pts.extend(p);
+        slope.extend(s);
     }
     Contour {
         pts,
@@ -501,6 +466,61 @@ pub fn refine(hf: &HeightField, tool: &Tool, floor: f64, c: &Contour) -> Contour
         closed: c.closed,
         pending: Vec::new(),
     }
+}
+
+/// Contour points a thread takes at once in `place` and `refine`.
+const RUN: usize = 64;
+
+/// `refine` on the move into point k: the points it ends up as, in order
+/// (the last is point k), with their slopes.
+fn refine_move(
+    hf: &HeightField,
+    tool: &Tool,
+    floor: f64,
+    level: f64,
+    cl: &(dyn Fn(f64, f64) -> f64 + Sync),
+    c: &Contour,
+    k: usize,
+) -> (Vec<DVec3>, Vec<f64>) {
+    let (mut pts, mut slope) = (Vec::new(), Vec::new());
+    let mut todo = vec![(c.pts[k - 1], c.pts[k], 0)];
+    while let Some((a, b, depth)) = todo.pop() {
+        let d = (b - a).truncate();
+        let len = d.length();
+        // the drop-cutter's probes alone decide a split (the exact
+        // sweep over the samples is `clear`'s, once thinned): the
+        // highest CL point along the chord, if it rises past the dip
+        let peak = if depth < 12 && len > 1e-3 {
+            peak(hf, tool, cl, a, b)
+        } else {
+            None
+        };
+        if let Some((top, at)) = peak {
+            let right = glam::DVec2::new(d.y, -d.x) / len;
+            let out = [1.0, 0.5, 0.25, 0.125]
+                .map(|f| at.truncate() + right * len * f)
+                .into_iter()
+                .map(|o| (o, cl(o.x, o.y)))
+                .find(|o| o.1 < level);
+            if let Some((out, zo)) = out {
+                let q = crossing(
+                    hf,
+                    tool,
+                    floor,
+                    level,
+                    ((out.x, out.y), zo),
+                    ((at.x, at.y), top),
+                    &mut Near::default(),
+                );
+                todo.push((q, b, depth + 1));
+                todo.push((a, q, depth + 1));
+                continue;
+            }
+        }
+        pts.push(b);
+        slope.push(c.slope[k]);
+    }
+    (pts, slope)
 }
 
 /// The highest point of the CL surface along the move a -> b between two
