@@ -261,15 +261,27 @@ impl Frame {
 }
 
 /// The stock's cell size for planning and judging a job: the relief's
-/// pitch divided by the odd whole number that makes it at most half the
-/// smallest tool radius `r` (so that relief samples stay cell centres,
-/// and what a tool leaves between its passes shows). At a tool radius per
-/// cell, the 48 px demo's roughing ramped down onto material its cells
-/// showed cut: `simulate` counted 5 plunges the judge did not see.
-pub fn cell(pitch: f64, r: f64) -> f64 {
-    let k = (2.0 * pitch / r - 1e-9).ceil().max(1.0) as usize;
+/// pitch divided by the odd whole number that makes it at most `most`
+/// mm (so that relief samples stay cell centres). What a tool leaves
+/// between its passes has to show: at a tool radius per cell, the 48 px
+/// demo's roughing ramped down onto material its cells showed cut
+/// (`simulate` counted 5 plunges the judge did not see), and at half a
+/// radius the 200 px demo with `--flat-background --steps 0.5` entered two
+/// ball layers straight down beside a ridge 0.3 mm wide that a layer's
+/// row and a wall's cut left between two cells: see `cell_limit`.
+pub fn cell(pitch: f64, most: f64) -> f64 {
+    let k = (pitch / most - 1e-9).ceil().max(1.0) as usize;
     let k = if k.is_multiple_of(2) { k + 1 } else { k };
     pitch / k as f64
+}
+
+/// The largest cell `cell` may take: a quarter of the smallest roughing
+/// or finishing tool's radius, and half a rest tool's (already a fraction
+/// of a millimetre; its rest region is read off these cells, and finer
+/// ones would send it after the big ball's scallops between samples).
+pub fn cell_limit(main_r: f64, rest_r: Option<f64>) -> f64 {
+    let main = 0.25 * main_r;
+    rest_r.map_or(main, |r| main.min(0.5 * r))
 }
 
 /// The relief turned a quarter counter-clockwise (seen from above) when
@@ -346,13 +358,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn cells_are_half_the_smallest_radius_or_finer() {
-        assert_eq!(cell(0.7, 1.5), 0.7);
-        // 6 mm samples, a 1.5 mm radius: 6 / 9 (8 is even)
-        assert!((cell(6.0, 1.5) - 6.0 / 9.0).abs() < 1e-12);
-        // 1.25 mm samples (the 48 px demo at 60 mm), a 3.175 mm ball
-        assert!((cell(1.25, 1.5875) - 1.25 / 3.0).abs() < 1e-12);
-        assert_eq!(cell(0.75, 1.5), 0.75);
+    fn cells_are_a_quarter_of_the_smallest_radius_or_finer() {
+        let q = |pitch: f64, r: f64| cell(pitch, cell_limit(r, None));
+        assert_eq!(q(0.35, 1.5), 0.35);
+        // 0.7 mm samples, a 1.5 mm radius: 0.7 / 3 (2 is even)
+        assert!((q(0.7, 1.5) - 0.7 / 3.0).abs() < 1e-12);
+        // 6 mm samples: 6 / 17 (16 is even)
+        assert!((q(6.0, 1.5) - 6.0 / 17.0).abs() < 1e-12);
+        // 0.5 mm samples (the 200 px demo at 100 mm), a 3.175 mm ball
+        assert!((q(0.5, 1.5875) - 0.5 / 3.0).abs() < 1e-12);
+        assert_eq!(q(0.375, 1.5), 0.375);
+        // a rest tool: half its radius
+        assert_eq!(cell(0.25, cell_limit(1.5875, Some(0.5))), 0.25);
+        assert!((cell(0.3, cell_limit(1.5875, Some(0.5))) - 0.1).abs() < 1e-12);
     }
 
     #[test]

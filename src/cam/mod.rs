@@ -379,14 +379,15 @@ impl ToolpathJob {
                 bail!("--rest-threshold {}: must be positive, mm", r.threshold);
             }
         }
-        let min_r = [
-            self.rough.as_ref().map(|r| m.tool(&r.tool)).transpose()?,
-            rest_tool,
-        ]
-        .into_iter()
-        .flatten()
-        .fold(tool.radius(), |a, t| a.min(t.radius()));
-        let cell = layout::cell(relief.pitch_mm(), min_r.max(0.05));
+        let main_r = self
+            .rough
+            .as_ref()
+            .map(|r| m.tool(&r.tool))
+            .transpose()?
+            .map_or(tool.radius(), |t| t.radius().min(tool.radius()));
+        let rest_r = rest_tool.as_ref().map(|t| t.radius().max(0.05));
+        let most = layout::cell_limit(main_r.max(0.05), rest_r);
+        let cell = layout::cell(relief.pitch_mm(), most);
         let mut planned = stock::Planned::new(plan.stock_in_panel(cell, ph));
         let mut ops: Vec<Op> = Vec::new();
         let mut raw_points = 0;

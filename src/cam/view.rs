@@ -6,6 +6,7 @@ use super::judge::Judged;
 use super::layout::Plan;
 use crate::error::Result;
 use crate::gcode::{Kind, Program};
+use crate::grid::Grid;
 use crate::relief::Relief;
 use glam::DVec3;
 use std::fmt::Write;
@@ -156,14 +157,29 @@ pub fn top_view(progs: &[Program], relief: &Relief, plan: &Plan, z_shift: f64) -
 
 /// The simulated cut of the job, shaded: light from `light` (azimuth,
 /// elevation in degrees; default upper left, 35 degrees up), contrast
-/// stretched over the shades present.
+/// stretched over the shades present. At the relief's own pitch: where
+/// the job was judged on finer cells (an odd number per sample, centred
+/// on the samples), the cell at each sample's centre.
 pub fn simulated_preview(
     j: &Judged,
     relief: &Relief,
     light: Option<(f64, f64)>,
 ) -> Result<Vec<u8>> {
+    let k = ((relief.pitch_mm() / j.stock.pitch).round() as usize).max(1);
+    let cut = if k > 1 {
+        let (w, h) = (j.cut.w / k, j.cut.h / k);
+        let mut g = Grid::new(w, h, 0.0f32);
+        for y in 0..h {
+            for x in 0..w {
+                g.set(x, y, *j.cut.get(x * k + k / 2, y * k + k / 2));
+            }
+        }
+        g
+    } else {
+        j.cut.clone()
+    };
     let carved = Relief {
-        heights: j.cut.map(|z| (*z as f64 + relief.depth_mm).max(0.0) as f32),
+        heights: cut.map(|z| (*z as f64 + relief.depth_mm).max(0.0) as f32),
         width_mm: j.stock.width,
         height_mm: j.stock.height,
         depth_mm: relief.depth_mm,
