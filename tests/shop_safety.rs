@@ -851,3 +851,49 @@ fn the_armadillo_svg_opens_and_its_rapids_are_short() {
     }
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// A refused job's advice fits the operation that cuts too deep, told by
+/// the op the line belongs to, not by its tool: the Cornell box's back
+/// view with a flat field and 0.5 mm steps has strips ~2 mm wide between
+/// the box and the panel's edges that a 3.175 mm flat cannot rough. With
+/// the same flat roughing and finishing, the finish is the one over (it
+/// used to be told to lower --step-down); with a roughing layer of 3 mm,
+/// roughing is.
+#[test]
+fn refusals_advise_for_the_operation_that_cuts_too_deep() {
+    let d = scratch("safe-advice");
+    let model = shared_model("cornell_box.obj");
+    let job = d.join("job.nc");
+    let base = [
+        "carve",
+        model.as_str(),
+        "--view",
+        "back",
+        "--flat-background",
+        "--steps",
+        "0.5",
+        "--resolution",
+        "256",
+        "-o",
+        job.to_str().unwrap(),
+    ];
+    for (extra, advice) in [
+        (
+            &["--tool", "flat:3.175", "--rough", "flat:3.175"][..],
+            "flat:3.175 cannot reach there, nor can the finishing tool's layers be entered",
+        ),
+        (
+            &["--rough", "flat:3.175", "--step-down", "3"][..],
+            "lower --step-down, or pass --allow-deep-cuts",
+        ),
+    ] {
+        let mut args = base.to_vec();
+        args.extend_from_slice(extra);
+        let out = run(&args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{extra:?}: written");
+        assert!(err.contains(advice), "{extra:?}: {err}");
+        assert!(!job.exists(), "{extra:?}: a job left behind");
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -157,11 +157,24 @@ impl ToolpathJob {
                 o.limit,
                 limits.name
             );
+            // the op the line belongs to: each op's header has one
+            // strategy comment, in order
+            let text = &texts[k].1;
+            let nth = text
+                .lines()
+                .take(o.line)
+                .filter(|l| l.starts_with("(strategy: "))
+                .count();
+            let roughing = nth >= 1
+                && groups[k]
+                    .1
+                    .get(nth - 1)
+                    .is_some_and(|op| op.title == "roughing");
             let advice = match rough_tool {
                 // roughing is there: the spot is one it cannot reach (a
                 // channel or corner narrower than its tool) and the
                 // finishing tool's own layers cannot be entered
-                Some(rt) if rt != o.tool => format!(
+                Some(rt) if !roughing => format!(
                     "{} cannot reach there, nor can the finishing tool's layers be entered: \
                      rough with a smaller tool (--rough flat:D), or pass --allow-deep-cuts",
                     rt.spec()
