@@ -166,20 +166,15 @@ pub fn simulated_preview(
     light: Option<(f64, f64)>,
 ) -> Result<Vec<u8>> {
     let k = ((relief.pitch_mm() / j.stock.pitch).round() as usize).max(1);
-    let cut = if k > 1 {
-        let (w, h) = (j.cut.w / k, j.cut.h / k);
-        let mut g = Grid::new(w, h, 0.0f32);
-        for y in 0..h {
-            for x in 0..w {
-                g.set(x, y, *j.cut.get(x * k + k / 2, y * k + k / 2));
-            }
-        }
-        g
-    } else {
-        j.cut.clone()
-    };
+    let (w, h) = (j.cut.w / k, j.cut.h / k);
+    let heights = (0..w * h)
+        .map(|i| {
+            let z = *j.cut.get((i % w) * k + k / 2, (i / w) * k + k / 2);
+            (z as f64 + relief.depth_mm).max(0.0) as f32
+        })
+        .collect();
     let carved = Relief {
-        heights: cut.map(|z| (*z as f64 + relief.depth_mm).max(0.0) as f32),
+        heights: Grid::from_vec(w, h, heights),
         width_mm: j.stock.width,
         height_mm: j.stock.height,
         depth_mm: relief.depth_mm,

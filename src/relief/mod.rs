@@ -141,15 +141,8 @@ const STEP_SPREAD: f32 = 0.6;
 /// samples; blurring a field blurs what it integrates to, and keeps each
 /// step's total rise.
 fn spread_steps(g: &Grid<f32>) -> Grid<f32> {
-    blur(g, STEP_SPREAD, 2)
-}
-
-/// `g` blurred by a separable Gaussian of `sigma` samples, cut off
-/// `reach` samples out (the weights within it sum to 1).
-fn blur(g: &Grid<f32>, sigma: f32, reach: usize) -> Grid<f32> {
-    let r = reach as isize;
-    let k: Vec<f32> = (-r..=r)
-        .map(|i| (-(i * i) as f32 / (2.0 * sigma * sigma)).exp())
+    let k: Vec<f32> = (-2i32..=2)
+        .map(|i| (-(i * i) as f32 / (2.0 * STEP_SPREAD * STEP_SPREAD)).exp())
         .collect();
     let sum: f32 = k.iter().sum();
     let k: Vec<f32> = k.iter().map(|v| v / sum).collect();
@@ -158,12 +151,12 @@ fn blur(g: &Grid<f32>, sigma: f32, reach: usize) -> Grid<f32> {
     rows.data
         .par_chunks_mut(w)
         .zip(g.data.par_chunks(w))
-        .for_each(|(o, row)| {
+        .for_each(|(o, r)| {
             for (x, out) in o.iter_mut().enumerate() {
                 for (j, kj) in k.iter().enumerate() {
-                    let xx = x as isize + j as isize - r;
+                    let xx = x as isize + j as isize - 2;
                     if xx >= 0 && (xx as usize) < w {
-                        *out += kj * row[xx as usize];
+                        *out += kj * r[xx as usize];
                     }
                 }
             }
@@ -171,10 +164,10 @@ fn blur(g: &Grid<f32>, sigma: f32, reach: usize) -> Grid<f32> {
     let mut out = Grid::new(w, h, 0.0f32);
     out.data.par_chunks_mut(w).enumerate().for_each(|(y, o)| {
         for (j, kj) in k.iter().enumerate() {
-            let yy = y as isize + j as isize - r;
+            let yy = y as isize + j as isize - 2;
             if yy >= 0 && (yy as usize) < h {
-                let row = &rows.data[yy as usize * w..(yy as usize + 1) * w];
-                for (a, b) in o.iter_mut().zip(row) {
+                let r = &rows.data[yy as usize * w..(yy as usize + 1) * w];
+                for (a, b) in o.iter_mut().zip(r) {
                     *a += kj * b;
                 }
             }
