@@ -324,6 +324,31 @@ fn bilinear(h: &Grid<f32>, x: f64, y: f64) -> f64 {
         + (v(x0, y1) * (1.0 - fx) + v(x1, y1) * fx) * fy
 }
 
+/// `g` spread by a Gaussian of `sigma` samples (over 4 either side).
+fn gaussian(g: &Grid<f32>, sigma: f64) -> Grid<f64> {
+    let k: Vec<f64> = (-4i32..=4)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let pass = |src: &Grid<f64>, dx: isize, dy: isize| {
+        let mut out = Grid::new(src.w, src.h, 0.0f64);
+        for y in 0..src.h {
+            for x in 0..src.w {
+                let mut v = 0.0;
+                for (j, kj) in k.iter().enumerate() {
+                    let o = j as isize - 4;
+                    let (xx, yy) = (x as isize + o * dx, y as isize + o * dy);
+                    if xx >= 0 && yy >= 0 && (xx as usize) < src.w && (yy as usize) < src.h {
+                        v += kj * src.get(xx as usize, yy as usize);
+                    }
+                }
+                out.set(x, y, v);
+            }
+        }
+        out
+    };
+    pass(&pass(&g.map(|v| *v as f64), 1, 0), 0, 1)
+}
+
 /// Across every outline (output samples whose step field is strong),
 /// along the step's direction from its centre: the height difference two
 /// samples either side (the step plus the surfaces' own slope over four
@@ -331,6 +356,7 @@ fn bilinear(h: &Grid<f32>, x: f64, y: f64) -> f64 {
 /// double it).
 fn step_heights(h: &Grid<f32>, f: &Field) -> (Vec<f64>, Vec<f64>) {
     let (mut two, mut three) = (Vec::new(), Vec::new());
+    let (gx, gy) = (gaussian(&f.sx, 1.5), gaussian(&f.sy, 1.5));
     for y in 3..h.h - 3 {
         for x in 3..h.w - 3 {
             let (sx, sy) = (*f.sx.get(x, y) as f64, *f.sy.get(x, y) as f64);
@@ -338,7 +364,17 @@ fn step_heights(h: &Grid<f32>, f: &Field) -> (Vec<f64>, Vec<f64>) {
             if m < 0.2 {
                 continue;
             }
-            let (nx, ny) = (sx / m, sy / m);
+            // the outline's normal: its steps around the sample, not the
+            // sample's own, which on a slantwise outline's staircase
+            // point along x or y (measured along x, a step at 27 degrees
+            // is crossed over 0.9 samples each side, not 2)
+            let (ax, ay) = (*gx.get(x, y), *gy.get(x, y));
+            let a = ax.hypot(ay);
+            let (nx, ny) = if a > 1e-6 {
+                (ax / a, ay / a)
+            } else {
+                (sx / m, sy / m)
+            };
             // the step's centre: the centroid of the step field along the
             // normal, over the samples the normal passes within 2 samples,
             // each once; a sample's x step lies on its edge to (x + 1, y),
@@ -373,16 +409,16 @@ fn step_heights(h: &Grid<f32>, f: &Field) -> (Vec<f64>, Vec<f64>) {
 
 /// `--steps 0.3` on the crossed tubes and the bunny at 512 and 2048 px:
 /// one step per outline, 0.3 +- 0.06 mm across it two samples either side,
-/// never two within 3 samples. The issue asks 95% everywhere; what holds
-/// today is asserted (figures in the output). The relief is split into
-/// its two parts, the integrated steps (`unit_steps`) and the integrated
-/// slopes (the rest), to say why: with the shoulders faded
-/// (`relief::shoulders`) the slopes part adds 0.002-0.006 mm (median; 0.10
-/// mm on the bunny at 512 px without them), and the steps part is what is
-/// left short: where outlines meet or end inside a surface their steps
-/// cannot all be whole (bg -> head -> ear -> bg climbs three steps and
-/// comes back down one), and the integration spreads the difference
-/// along them (the bunny's ear base, its chest and paws).
+/// on at least 95% of the outline samples (the issue's figure). The
+/// relief is split into its two parts, the integrated steps
+/// (`unit_steps`) and the integrated slopes (the rest), to say why when
+/// it fails: the slopes part adds 0.000-0.008 mm (median) with the
+/// shoulders faded (`relief::shoulders`), and the steps part is short
+/// only where outlines meet or end inside a surface (bg -> head -> ear ->
+/// bg climbs two steps and comes back down one, so the three cannot all
+/// be whole) and beside the few outlines a sample or two long. At a
+/// junction two steps lie within 3 samples of each other by necessity;
+/// that is the stacked share allowed (at most 0.2%).
 #[test]
 fn steps_are_one_clean_step_per_outline() {
     let step = 0.3;
@@ -390,10 +426,10 @@ fn steps_are_one_clean_step_per_outline() {
     // (model, px, least share of clean steps, most share of stacked ones,
     // least share of the steps part within 0.06 mm three samples either side)
     for (model, res, clean, stacked_max, exact) in [
-        ("tubes", 512, 0.93, 0.001, 0.97),
-        ("stanford-bunny.obj", 512, 0.90, 0.002, 0.90),
-        ("tubes", 2048, 0.99, 0.001, 0.99),
-        ("stanford-bunny.obj", 2048, 0.90, 0.001, 0.90),
+        ("tubes", 512, 0.95, 0.001, 0.97),
+        ("stanford-bunny.obj", 512, 0.95, 0.002, 0.93),
+        ("tubes", 2048, 0.95, 0.001, 0.99),
+        ("stanford-bunny.obj", 2048, 0.95, 0.001, 0.93),
     ] {
         let (h, f) = if model == "tubes" {
             let cam = Camera {

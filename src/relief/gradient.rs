@@ -9,6 +9,7 @@
 //! and remembered as a unit step in its original direction so that
 //! `--steps` can trace it with a constant height.
 
+use super::curl;
 use crate::grid::Grid;
 use crate::scene::DepthMap;
 use rayon::prelude::*;
@@ -379,6 +380,8 @@ fn shape_with<S: Source, const F: usize, const A: usize, const C: usize>(
             },
         )
         .sum();
+    // the thinned steps' slantwise gaps closed (`curl`)
+    curl::pair_off(&mut f.sx, &mut f.sy);
     f
 }
 

@@ -3,6 +3,7 @@
 //! integration, optional constant steps at outlines, scaling to depth.
 
 pub mod bands;
+pub mod curl;
 pub mod file;
 pub mod gradient;
 pub mod panel;
