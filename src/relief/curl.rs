@@ -17,6 +17,7 @@
 //! before.
 
 use crate::grid::Grid;
+use rayon::prelude::*;
 
 /// Curl pairs at most this far apart (output samples, between plaquette
 /// centres) are closed.
@@ -47,19 +48,20 @@ pub fn pair_off(sx: &mut Grid<f32>, sy: &mut Grid<f32>) -> (f32, f32) {
         return (0.0, 0.0);
     }
     let (pw, ph) = (w - 1, h - 1);
+    // the curl of every plaquette, rows in parallel (most are 0)
     let mut rest = vec![0.0f32; pw * ph];
-    let mut sources = Vec::new();
-    for y in 0..ph {
-        for x in 0..pw {
-            let c = curl(sx, sy, x, y);
-            if c.abs() > EPS {
-                rest[y * pw + x] = c;
-                if c > 0.0 {
-                    sources.push((x, y));
-                }
+    rest.par_chunks_mut(pw).enumerate().for_each(|(y, row)| {
+        for (x, c) in row.iter_mut().enumerate() {
+            let v = curl(sx, sy, x, y);
+            if v.abs() > EPS {
+                *c = v;
             }
         }
-    }
+    });
+    let sources: Vec<(usize, usize)> = (0..pw * ph)
+        .filter(|&i| rest[i] > EPS)
+        .map(|i| (i % pw, i / pw))
+        .collect();
     let total: f32 = rest.iter().map(|c| c.abs()).sum();
     let r = REACH.floor() as isize;
     let mut pairs = Vec::new();
