@@ -120,11 +120,14 @@ impl ToolpathJob {
             None => vec![(self.output.clone(), ops, plan.clone(), header_notes.clone())],
         };
         let mut texts = Vec::new();
+        // per file: the line each of its ops starts after
+        let mut op_starts = Vec::new();
         for (file, group, fplan, fnotes) in &files {
-            let text = t.time("g-code", || {
+            let (text, starts) = t.time("g-code", || {
                 self.emit(group, relief, fplan, m, z_shift, fnotes)
             });
             texts.push((file.clone(), text));
+            op_starts.push(starts);
         }
         // the simulator judges the job: depth of cut, plunges, residual;
         // every file placed in the one job's frame
@@ -157,19 +160,9 @@ impl ToolpathJob {
                 o.limit,
                 limits.name
             );
-            // the op the line belongs to: each op's header has one
-            // strategy comment, in order
-            let text = &texts[k].1;
-            let nth = text
-                .lines()
-                .take(o.line)
-                .filter(|l| l.starts_with("(strategy: "))
-                .count();
-            let roughing = nth >= 1
-                && groups[k]
-                    .1
-                    .get(nth - 1)
-                    .is_some_and(|op| op.title == "roughing");
+            // the op the line belongs to: the last that starts before it
+            let op = op_starts[k].iter().rposition(|&s| s < o.line).unwrap_or(0);
+            let roughing = groups[k].1[op].title == "roughing";
             let advice = match rough_tool {
                 // roughing is there: the spot is one it cannot reach (a
                 // channel or corner narrower than its tool) and the
@@ -381,7 +374,7 @@ impl ToolpathJob {
         m: &Machine,
         z_shift: f64,
         notes: &[String],
-    ) -> String {
+    ) -> (String, Vec<usize>) {
         let header = |op: &Op| {
             vec![
                 format!(
@@ -451,7 +444,13 @@ impl ToolpathJob {
             m.steps_per_mm.z,
         ));
         let shift = plan.shift;
+        // op 0 starts with the job (its header is the job's); every other
+        // after the lines before its own header
+        let mut starts = vec![0];
         for (k, op) in ops.iter().enumerate() {
+            if k > 0 {
+                starts.push(e.out.lines().count());
+            }
             if k > 0 && op.tool != ops[k - 1].tool {
                 e.tool_change(&header(op), &op.settings, &op.zero);
             } else if k > 0 {
@@ -468,7 +467,7 @@ impl ToolpathJob {
                 e.pass(&pts, &op.settings, pass.clear_z);
             }
         }
-        e.finish(&ops[ops.len() - 1].settings)
+        (e.finish(&ops[ops.len() - 1].settings), starts)
     }
 }
 
