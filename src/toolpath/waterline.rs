@@ -15,7 +15,6 @@ use crate::grid::Grid;
 use crate::tool::Tool;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// How closely a contour point is placed on its level (mm, on the low side).
 /// Two micrometres, not a tenth: the moves between crossings then mostly
@@ -262,13 +261,19 @@ pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
             segs
         })
         .collect();
-    let next: HashMap<Edge, Edge> = cells.into_iter().flatten().collect();
+    // every crossing edge and the one its segment leads to, in scan order
+    // (row, column, horizontal first), found again by binary search
+    let id = |e: &Edge| (((e.j * w + e.i) as u64) << 1) | e.vertical as u64;
+    let mut next: Vec<(Edge, Edge)> = cells.into_iter().flatten().collect();
+    next.sort_unstable_by_key(|(e, _)| id(e));
+    let index = |e: &Edge| {
+        next.binary_search_by_key(&id(e), |(a, _)| id(a))
+            .expect("every crossing edge leads on")
+    };
     // each crossing on the exact CL surface, low side
-    let mut keys: Vec<Edge> = next.keys().copied().collect();
-    keys.sort_by_key(|e| (e.j, e.i, e.vertical));
-    let points: HashMap<Edge, (DVec3, f64, Crossing)> = keys
+    let points: Vec<(DVec3, f64, Crossing)> = next
         .par_iter()
-        .map(|&e| {
+        .map(|&(e, _)| {
             let ((ai, aj), (bi, bj)) = e.nodes();
             let (pa, pb) = (g.pos(ai, aj), g.pos(bi, bj));
             let (lo, hi) = if above(ai, aj) { (pb, pa) } else { (pa, pb) };
@@ -286,27 +291,27 @@ pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
                 level,
             );
             let z = (zl, zh);
-            (e, (at, slope, Crossing { lo, hi, z }))
+            (at, slope, Crossing { lo, hi, z })
         })
         .collect();
-    let mut seen = std::collections::HashSet::new();
+    let mut seen = vec![false; next.len()];
     let mut out = Vec::new();
-    for &start in &keys {
-        if seen.contains(&start) {
+    for first in 0..next.len() {
+        if seen[first] {
             continue;
         }
         let mut pts = Vec::new();
         let mut slope = Vec::new();
         let mut pending = Vec::new();
-        let mut e = start;
+        let mut k = first;
         loop {
-            seen.insert(e);
-            let (p, s, c) = points[&e];
+            seen[k] = true;
+            let (p, s, c) = points[k];
             pts.push(p);
             slope.push(s);
             pending.push(Some(c));
-            e = next[&e];
-            if e == start {
+            k = index(&next[k].1);
+            if k == first {
                 break;
             }
         }
