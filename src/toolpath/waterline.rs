@@ -129,7 +129,7 @@ pub struct Crossing {
 }
 
 /// A grid edge: from node (i, j) one step in +x (`vertical` false) or +y.
-#[derive(Clone, Copy, Hash, PartialEq, Eq, Debug)]
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
 struct Edge {
     i: usize,
     j: usize,
