@@ -312,6 +312,7 @@ impl ReliefJob {
             "model": self.model_name(),
             "camera": self.camera(),
             "resolution": self.resolution,
+            "smooth": self.smooth,
             "material": self.material,
             "relief": p,
             "emphasize": self.emphasize,

@@ -52,8 +52,9 @@ struct Setup {
     id: u16,
     /// The plane h = a x + b y + c in fixed-point pixel coordinates.
     plane: [f64; 3],
-    /// Smooth slopes at the corners (in the order of `v`), if any.
-    corner: CornerSlopes,
+    /// The smooth slopes in x and y interpolated across the triangle from
+    /// its corners, as planes like `plane` (zero without smooth shading).
+    slope: [[f64; 3]; 2],
 }
 
 fn setup(p: [[f64; 3]; 3], id: u16, corner: CornerSlopes, w: usize, h: usize) -> Option<Setup> {
@@ -98,17 +99,23 @@ fn setup(p: [[f64; 3]; 3], id: u16, corner: CornerSlopes, w: usize, h: usize) ->
     if x0 > x1 || y0 > y1 {
         return None;
     }
-    // h is affine in the edge values, which are affine in (x, y)
-    let at = |p: [f64; 2]| (0..3).map(|k| edge_value(&v, k, p) * hh[k]).sum::<f64>() / area as f64;
-    let c = at([0.0, 0.0]);
-    let plane = [at([1.0, 0.0]) - c, at([0.0, 1.0]) - c, c];
+    // h is affine in the edge values, which are affine in (x, y); so are
+    // the interpolated slopes
+    let plane_of = |f: [f64; 3]| {
+        let at =
+            |p: [f64; 2]| (0..3).map(|k| edge_value(&v, k, p) * f[k]).sum::<f64>() / area as f64;
+        let c = at([0.0, 0.0]);
+        [at([1.0, 0.0]) - c, at([0.0, 1.0]) - c, c]
+    };
+    let plane = plane_of(hh);
+    let slope = [0, 1].map(|a| plane_of(corner.map(|c| c[a] as f64)));
     Some(Setup {
         v,
         h: hh,
         area,
         bias,
         plane,
-        corner,
+        slope,
         x0: x0 as usize,
         x1: x1 as usize,
         y0: y0 as usize,
@@ -263,14 +270,8 @@ impl Surfaces {
             return None;
         }
         let s = &self.tris[t as usize - 1];
-        let p = Self::centre(x, y);
-        let mut g = [0.0; 2];
-        for (k, c) in s.corner.iter().enumerate() {
-            let l = edge_value(&s.v, k, p) / s.area as f64;
-            g[0] += l * c[0] as f64;
-            g[1] += l * c[1] as f64;
-        }
-        Some(g)
+        let [px, py] = Self::centre(x, y);
+        Some(s.slope.map(|[a, b, c]| a * px + b * py + c))
     }
 
     /// Whether the edge between samples a and b (neighbours) is an outline:
