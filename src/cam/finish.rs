@@ -160,6 +160,11 @@ impl ToolpathJob {
         // every level's contours, then all of them placed, refined and
         // checked at once: one level may hold a single long contour
         let levels = waterline::levels(&g, dz);
+        // steep ground takes every m-th level, and every level within m
+        // of its foot: the lowest contour of a wall is what cleans the
+        // corner a raster row beside it leaves (rows parallel to a wall's
+        // foot ride up on it)
+        let feet = steep_only.then(|| g.feet());
         let contours: Vec<(usize, waterline::Contour)> = levels
             .par_iter()
             .enumerate()
@@ -169,7 +174,13 @@ impl ToolpathJob {
                 let keep = |p: DVec3, slope: f64| {
                     (0.0..=w).contains(&p.x)
                         && (0.0..=h).contains(&p.y)
-                        && (!steep_only || waterline::every_nth(slope).is_some_and(|m| k % m == 0))
+                        && (!steep_only
+                            || waterline::every_nth(slope).is_some_and(|m| {
+                                k % m == 0
+                                    || feet
+                                        .as_ref()
+                                        .is_some_and(|f| level - f.at(p.x, p.y) < m as f64 * dz)
+                            }))
                         && keep_also.is_none_or(|f| f(p.x, p.y))
                 };
                 waterline::contours(&g, level)

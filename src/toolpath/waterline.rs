@@ -106,6 +106,72 @@ impl ClGrid {
         let gy = d(self.at(i, jl), self.at(i, jr), jr - jl);
         gx.hypot(gy)
     }
+
+    /// The foot of every node: the CL height of the gentle ground (slope
+    /// under GENTLEST) reached from it by always stepping to its lowest
+    /// neighbour; a node on gentle ground is its own foot.
+    pub fn feet(&self) -> Feet {
+        let (w, h) = (self.z.w, self.z.h);
+        let n = w * h;
+        // nodes from the lowest up: a node's lowest neighbour is settled
+        // before it (ties broken by index, the same order both ways)
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        order.par_sort_unstable_by(|&a, &b| {
+            self.z.data[a as usize]
+                .total_cmp(&self.z.data[b as usize])
+                .then(a.cmp(&b))
+        });
+        let gentle: Vec<bool> = (0..n)
+            .into_par_iter()
+            .map(|k| self.slope(k % w, k / w) < GENTLEST)
+            .collect();
+        let mut foot = vec![0.0f64; n];
+        for &k in &order {
+            let k = k as usize;
+            let (i, j) = (k % w, k / w);
+            let z = self.z.data[k];
+            let lowest = [(-1, 0), (1, 0), (0, -1), (0, 1)]
+                .into_iter()
+                .filter_map(|(di, dj): (isize, isize)| {
+                    let (a, b) = (i as isize + di, j as isize + dj);
+                    (a >= 0 && b >= 0 && (a as usize) < w && (b as usize) < h)
+                        .then(|| b as usize * w + a as usize)
+                })
+                .filter(|&q| (self.z.data[q], q) < (z, k))
+                .min_by(|&a, &b| self.z.data[a].total_cmp(&self.z.data[b]).then(a.cmp(&b)));
+            foot[k] = match lowest {
+                Some(q) if !gentle[k] => foot[q],
+                _ => z,
+            };
+        }
+        Feet {
+            z: Grid::from_vec(w, h, foot),
+            x0: self.x0,
+            y0: self.y0,
+            p: self.p,
+        }
+    }
+}
+
+/// The height of the gentle ground below each node of a `ClGrid`.
+pub struct Feet {
+    z: Grid<f64>,
+    x0: f64,
+    y0: f64,
+    p: f64,
+}
+
+impl Feet {
+    /// The foot of the node nearest (x, y).
+    pub fn at(&self, x: f64, y: f64) -> f64 {
+        let i = ((x - self.x0) / self.p)
+            .round()
+            .clamp(0.0, (self.z.w - 1) as f64) as usize;
+        let j = ((y - self.y0) / self.p)
+            .round()
+            .clamp(0.0, (self.z.h - 1) as f64) as usize;
+        self.z.data[j * self.z.w + i]
+    }
 }
 
 /// The node spacing: the sample pitch, or a whole multiple of it up to an
@@ -775,6 +841,49 @@ mod tests {
     /// has vertical faces (a sample meeting the ball's equator), so the
     /// distance is the lesser of the height below the level and the
     /// horizontal distance to where the CL reaches the level.
+    /// A block standing on a floor that slopes gently: the feet of the
+    /// block's sides are the floor's CL height beside them (not the panel's
+    /// lowest point, nor the block's top), and the floor is its own foot.
+    #[test]
+    fn the_foot_of_a_wall_is_the_ground_beside_it() {
+        let (n, p) = (80, 0.25);
+        let floor = |x: f64| -3.0 + 0.02 * x;
+        let z = Grid::from_vec(
+            n,
+            n,
+            (0..n * n)
+                .map(|k| {
+                    let (x, y) = ((k % n) as f64 * p, (k / n) as f64 * p);
+                    let block = (8.0..12.0).contains(&x) && (5.0..15.0).contains(&y);
+                    if block {
+                        -1.0
+                    } else {
+                        floor(x)
+                    }
+                })
+                .collect(),
+        );
+        let hf = HeightField::new(z, p);
+        let tool = Tool::parse("ball:2").unwrap();
+        let g = ClGrid::new(&hf, &tool, 20.0, 20.0, -3.0);
+        let feet = g.feet();
+        // on the floor, well away from the block: its own height
+        let cl = |x: f64, y: f64| hf.drop(&tool, x, y).unwrap();
+        for (x, y) in [(3.0, 3.0), (17.0, 17.0)] {
+            assert!((feet.at(x, y) - cl(x, y)).abs() < 0.01);
+        }
+        // on the block's sides (the ball riding up them): the floor beside
+        for (x, y, beside) in [(7.6, 10.0, 6.0), (12.4, 10.0, 14.0)] {
+            let (h, f) = (cl(x, y), feet.at(x, y));
+            assert!(h > floor(x) + 0.5, "({x}, {y}) is on the wall: {h}");
+            assert!(
+                (f - cl(beside, 10.0)).abs() < 0.05,
+                "foot at ({x}, {y}) {f} against the floor beside {}",
+                cl(beside, 10.0)
+            );
+        }
+    }
+
     #[test]
     fn contours_are_closed_and_on_the_cl_surface() {
         let (n, p) = (80, 0.25);
