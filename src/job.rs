@@ -63,7 +63,7 @@ pub struct ReliefJob {
     pub invert: bool,
     pub method: Method,
     /// Smooth shading: slopes from vertex normals, split at creases
-    /// sharper than this many degrees.
+    /// sharper than this many degrees (45 by default); `None` = flat facets.
     pub smooth: Option<f64>,
     /// `--fade DIR[:AMOUNT]`, parsed with the other parameters.
     pub fade: Option<String>,
@@ -97,7 +97,7 @@ impl Default for ReliefJob {
             mirror: false,
             invert: false,
             method: Method::Gradient,
-            smooth: None,
+            smooth: Some(DEFAULT_CREASE),
             fade: None,
             tilt: None,
             output: PathBuf::from("relief.png"),
@@ -120,6 +120,10 @@ pub enum Sight {
 pub const DEFAULT_ALPHA: f64 = 4.0;
 /// Default depth (mm) without `--depth` or `--material`.
 pub const DEFAULT_DEPTH: f64 = 5.0;
+/// Default crease angle (degrees) of smooth shading: a tessellated curve
+/// (a 16-gon turns 22.5 degrees a facet) is smoothed, a box's or a
+/// machined part's edges stay sharp.
+pub const DEFAULT_CREASE: f64 = 45.0;
 
 /// What a finished run reports.
 pub struct Summary {
@@ -312,7 +316,7 @@ impl ReliefJob {
             "model": self.model_name(),
             "camera": self.camera(),
             "resolution": self.resolution,
-            "smooth": self.smooth,
+            "smooth": self.smooth.filter(|_| !self.model_is("png")),
             "material": self.material,
             "relief": p,
             "emphasize": self.emphasize,

@@ -1,12 +1,12 @@
 //! The finishing tool's passes: raster rows, waterlines, and its own
 //! layers where more is left than it may cut at once.
 
-use super::{stock, tile, Direction, Finish, ToolpathJob};
+use super::{order, stock, tile, Direction, Finish, ToolpathJob};
 use crate::gcode::emit::Settings;
 use crate::relief::Relief;
 use crate::tool::Tool;
 use crate::toolpath::dropcutter::HeightField;
-use crate::toolpath::{contour_arcs, path, raster, rough, waterline, Pass};
+use crate::toolpath::{contour_arcs, path, pencil, raster, rough, waterline, Pass};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -139,6 +139,37 @@ impl ToolpathJob {
             .collect();
         let raw = done.iter().map(|d| d.1).sum();
         (done.into_iter().flat_map(|d| d.0).collect(), raw)
+    }
+
+    /// Pencil passes of `tool` along the valleys of its CL surface over
+    /// `region` that bend up by at least `kappa` (1/mm), where `keep`
+    /// holds: merged, checked, and toured from `start`. Returns the passes
+    /// and the CL points dropped.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn pencil(
+        &self,
+        hf: &HeightField,
+        tool: &Tool,
+        region: [f64; 4],
+        floor: f64,
+        kappa: f64,
+        keep: &(dyn Fn(f64, f64) -> bool + Sync),
+        start: Option<DVec3>,
+        clear_z: f64,
+    ) -> (Vec<Pass>, usize) {
+        let lines: Vec<Vec<DVec3>> = pencil::lines(hf, tool, region, floor, kappa, keep)
+            .par_iter()
+            .map(|l| {
+                let m = path::merge(l, self.tolerance);
+                path::check_and_refine(hf, tool, &m, floor, self.tolerance, None)
+            })
+            .collect();
+        let raw = lines.iter().map(Vec::len).sum();
+        let passes = order::tour(lines, start)
+            .into_iter()
+            .map(|pts| Pass { pts, clear_z })
+            .collect();
+        (passes, raw)
     }
 
     /// Waterline passes `dz` apart, level by level from the top, nearest

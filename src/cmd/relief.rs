@@ -87,10 +87,14 @@ pub struct ReliefOpts {
     /// Hollow relief (for moulds).
     #[arg(long)]
     pub invert: bool,
-    /// Smooth shading for tessellated models: slopes from vertex normals (the
-    /// OBJ's own, else computed), split at creases sharper than ANGLE degrees.
-    #[arg(long, value_name = "ANGLE", num_args = 0..=1, default_missing_value = "45")]
-    pub smooth: Option<f64>,
+    /// Smooth shading (the default for meshes): slopes from vertex normals
+    /// (the OBJ's own, else computed), split at creases sharper than ANGLE
+    /// degrees, so a tessellated model's facets do not carve.
+    #[arg(long, value_name = "ANGLE", num_args = 0..=1, default_value = "45", default_missing_value = "45")]
+    pub smooth: f64,
+    /// Flat facets: each triangle's own plane, as the mesh is (low-poly art).
+    #[arg(long, conflicts_with = "smooth")]
+    pub faceted: bool,
     /// Fade the heights linearly toward a side: DIR[:AMOUNT], DIR = right, top,
     /// left, bottom or degrees counter-clockwise from the right; AMOUNT 0..1
     /// (1 = to nothing at that side).
@@ -166,7 +170,7 @@ impl ReliefOpts {
             mirror: self.mirror,
             invert: self.invert,
             method: self.method,
-            smooth: self.smooth,
+            smooth: (!self.faceted).then_some(self.smooth),
             fade: self.fade,
             tilt: self.tilt,
             output,

@@ -63,7 +63,7 @@ impl Default for ReliefSettings {
             material: None,
             mirror: false,
             invert: false,
-            smooth: None,
+            smooth: j.smooth,
             fade: None,
             tilt: None,
             method: "gradient".into(),
@@ -202,7 +202,10 @@ impl ReliefSettings {
         }
         l.switch("mirror", self.mirror);
         l.switch("invert", self.invert);
-        l.opt("smooth", self.smooth);
+        match self.smooth {
+            None => l.switch("faceted", true),
+            Some(a) => l.num("smooth", a, d.smooth.unwrap_or(a)),
+        }
         l.text("fade", &self.fade);
         l.text("tilt", &self.tilt);
         if self.method != d.method {
