@@ -224,7 +224,7 @@ fn fixture(name: &str) -> Vec<u8> {
 }
 
 /// A small mesh through every stage that reads its numbers: checks, camera,
-/// rasterizer.
+/// smooth normals, rasterizer.
 fn mesh_target(bytes: &[u8], stl: bool) {
     let m = if stl {
         mesh::read_stl(bytes, "fuzz.stl")
@@ -233,7 +233,10 @@ fn mesh_target(bytes: &[u8], stl: bool) {
     };
     if let Ok(m) = m {
         if m.validate("fuzz").is_ok() && m.triangles.len() < 5000 {
-            let _ = scene::render(&m, &Camera::default(), 16, 2, (1 << 26, "allowed"), None);
+            // faceted, and smooth (the default: welding, vertex normals)
+            for smooth in [None, Some(45.0)] {
+                let _ = scene::render(&m, &Camera::default(), 16, 2, (1 << 26, "allowed"), smooth);
+            }
         }
     }
 }

@@ -63,43 +63,62 @@ impl Mesh {
                 .map(|t| t.map(|i| self.normals[i as usize]))
                 .collect();
         }
-        // weld by exact position: seams of patches share no indices
-        let mut canon = std::collections::HashMap::new();
-        let weld: Vec<u32> = self
-            .positions
-            .iter()
-            .enumerate()
-            .map(|(i, p)| {
-                *canon
-                    .entry(p.to_array().map(f32::to_bits))
-                    .or_insert(i as u32)
-            })
-            .collect();
+        use rayon::prelude::*;
+        // weld by exact position (seams of patches, and an STL's triangle
+        // soup, share no indices): each vertex maps to the first one at
+        // its place, found by sorting (position, index)
+        let key = |i: usize| self.positions[i].to_array().map(f32::to_bits);
+        let mut order: Vec<u32> = (0..self.positions.len() as u32).collect();
+        order.par_sort_unstable_by_key(|&i| (key(i as usize), i));
+        let mut weld = vec![0u32; self.positions.len()];
+        let mut first = 0;
+        for (k, &i) in order.iter().enumerate() {
+            if k == 0 || key(i as usize) != key(order[k - 1] as usize) {
+                first = i;
+            }
+            weld[i as usize] = first;
+        }
         let face: Vec<Vec3> = self
             .triangles
-            .iter()
+            .par_iter()
             .map(|t| {
                 let [a, b, c] = t.map(|i| self.positions[i as usize]);
                 (b - a).cross(c - a)
             })
             .collect();
-        let mut around: Vec<Vec<u32>> = vec![Vec::new(); self.positions.len()];
+        let unit: Vec<Vec3> = face.par_iter().map(|f| f.normalize_or_zero()).collect();
+        // the faces around each welded vertex, in face order (compressed
+        // rows: `start[v]..start[v + 1]` of `around`)
+        let mut start = vec![0u32; self.positions.len() + 1];
+        for t in &self.triangles {
+            for &i in t {
+                start[weld[i as usize] as usize + 1] += 1;
+            }
+        }
+        for v in 1..start.len() {
+            start[v] += start[v - 1];
+        }
+        let mut fill = start.clone();
+        let mut around = vec![0u32; 3 * self.triangles.len()];
         for (f, t) in self.triangles.iter().enumerate() {
             for &i in t {
-                around[weld[i as usize] as usize].push(f as u32);
+                let v = weld[i as usize] as usize;
+                around[fill[v] as usize] = f as u32;
+                fill[v] += 1;
             }
         }
         let cos = crease_deg.to_radians().cos() as f32;
         self.triangles
-            .iter()
+            .par_iter()
             .enumerate()
             .map(|(f, t)| {
-                let own = face[f].normalize_or_zero();
+                let own = unit[f];
                 t.map(|i| {
-                    let n: Vec3 = around[weld[i as usize] as usize]
+                    let v = weld[i as usize] as usize;
+                    let n: Vec3 = around[start[v] as usize..start[v + 1] as usize]
                         .iter()
+                        .filter(|&&g| unit[g as usize].dot(own) >= cos)
                         .map(|&g| face[g as usize])
-                        .filter(|g| g.normalize_or_zero().dot(own) >= cos)
                         .sum();
                     n.normalize_or(own)
                 })

@@ -85,7 +85,8 @@ fn corner_slopes(
             if face.dot(pr.frame.to_eye(p[0])) < 0.0 {
                 face = -face; // seen from its back: its normals turn too
             }
-            let flat = pr.frame.plane_slope(p[0], face);
+            // (the face's own slope only where a corner's is not seen)
+            let flat = || pr.frame.plane_slope(p[0], face);
             let mut out = [[0.0f32; 2]; 3];
             for k in 0..3 {
                 // the file's normals may face either way: the face decides
@@ -93,7 +94,11 @@ fn corner_slopes(
                 if nk.dot(face) < 0.0 {
                     nk = -nk;
                 }
-                let s = pr.frame.plane_slope(p[k], nk).or(flat).unwrap_or([0.0; 2]);
+                let s = pr
+                    .frame
+                    .plane_slope(p[k], nk)
+                    .or_else(flat)
+                    .unwrap_or([0.0; 2]);
                 out[k] = [s[0] as f32, s[1] as f32];
             }
             out
