@@ -835,12 +835,6 @@ pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3], arcs: bool) -> Vec<DV
 mod tests {
     use super::*;
 
-    /// A dome and a steep-sided block on a floor, with a ball and a V tool:
-    /// every contour closes and every point is on the CL surface at its
-    /// level (acceptance: within 0.01 mm). On sampled data the CL surface
-    /// has vertical faces (a sample meeting the ball's equator), so the
-    /// distance is the lesser of the height below the level and the
-    /// horizontal distance to where the CL reaches the level.
     /// A block standing on a floor that slopes gently: the feet of the
     /// block's sides are the floor's CL height beside them (not the panel's
     /// lowest point, nor the block's top), and the floor is its own foot.
@@ -884,6 +878,12 @@ mod tests {
         }
     }
 
+    /// A dome and a steep-sided block on a floor, with a ball and a V tool:
+    /// every contour closes and every point is on the CL surface at its
+    /// level (acceptance: within 0.01 mm). On sampled data the CL surface
+    /// has vertical faces (a sample meeting the ball's equator), so the
+    /// distance is the lesser of the height below the level and the
+    /// horizontal distance to where the CL reaches the level.
     #[test]
     fn contours_are_closed_and_on_the_cl_surface() {
         let (n, p) = (80, 0.25);
