@@ -208,9 +208,10 @@ impl ToolpathJob {
                         && (!steep_only
                             || waterline::every_nth(slope).is_some_and(|m| {
                                 k % m == 0
-                                    || feet
-                                        .as_ref()
-                                        .is_some_and(|f| level - f.at(p.x, p.y) < m as f64 * dz)
+                                    || feet.as_ref().is_some_and(|f| {
+                                        let (i, j) = g.nearest(p.x, p.y);
+                                        level - *f.get(i, j) < m as f64 * dz
+                                    })
                             }))
                         && keep_also.is_none_or(|f| f(p.x, p.y))
                 };

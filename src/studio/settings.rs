@@ -204,7 +204,7 @@ impl ReliefSettings {
         l.switch("invert", self.invert);
         match self.smooth {
             None => l.switch("faceted", true),
-            Some(a) => l.num("smooth", a, d.smooth.unwrap_or(a)),
+            Some(a) => l.num("smooth", a, crate::job::DEFAULT_CREASE),
         }
         l.text("fade", &self.fade);
         l.text("tilt", &self.tilt);

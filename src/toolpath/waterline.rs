@@ -110,7 +110,7 @@ impl ClGrid {
     /// The foot of every node: the CL height of the gentle ground (slope
     /// under GENTLEST) reached from it by always stepping to its lowest
     /// neighbour; a node on gentle ground is its own foot.
-    pub fn feet(&self) -> Feet {
+    pub fn feet(&self) -> Grid<f64> {
         let (w, h) = (self.z.w, self.z.h);
         let n = w * h;
         // nodes from the lowest up: a node's lowest neighbour is settled
@@ -144,33 +144,15 @@ impl ClGrid {
                 _ => z,
             };
         }
-        Feet {
-            z: Grid::from_vec(w, h, foot),
-            x0: self.x0,
-            y0: self.y0,
-            p: self.p,
-        }
+        Grid::from_vec(w, h, foot)
     }
-}
 
-/// The height of the gentle ground below each node of a `ClGrid`.
-pub struct Feet {
-    z: Grid<f64>,
-    x0: f64,
-    y0: f64,
-    p: f64,
-}
-
-impl Feet {
-    /// The foot of the node nearest (x, y).
-    pub fn at(&self, x: f64, y: f64) -> f64 {
-        let i = ((x - self.x0) / self.p)
-            .round()
-            .clamp(0.0, (self.z.w - 1) as f64) as usize;
-        let j = ((y - self.y0) / self.p)
-            .round()
-            .clamp(0.0, (self.z.h - 1) as f64) as usize;
-        self.z.data[j * self.z.w + i]
+    /// The node nearest (x, y), within the grid.
+    pub fn nearest(&self, x: f64, y: f64) -> (usize, usize) {
+        let at = |v: f64, v0: f64, n: usize| {
+            ((v - v0) / self.p).round().clamp(0.0, (n - 1) as f64) as usize
+        };
+        (at(x, self.x0, self.z.w), at(y, self.y0, self.z.h))
     }
 }
 
@@ -861,14 +843,18 @@ mod tests {
         let tool = Tool::parse("ball:2").unwrap();
         let g = ClGrid::new(&hf, &tool, 20.0, 20.0, -3.0);
         let feet = g.feet();
+        let foot = |x: f64, y: f64| {
+            let (i, j) = g.nearest(x, y);
+            *feet.get(i, j)
+        };
         // on the floor, well away from the block: its own height
         let cl = |x: f64, y: f64| hf.drop(&tool, x, y).unwrap();
         for (x, y) in [(3.0, 3.0), (17.0, 17.0)] {
-            assert!((feet.at(x, y) - cl(x, y)).abs() < 0.01);
+            assert!((foot(x, y) - cl(x, y)).abs() < 0.01);
         }
         // on the block's sides (the ball riding up them): the floor beside
         for (x, y, beside) in [(7.6, 10.0, 6.0), (12.4, 10.0, 14.0)] {
-            let (h, f) = (cl(x, y), feet.at(x, y));
+            let (h, f) = (cl(x, y), foot(x, y));
             assert!(h > floor(x) + 0.5, "({x}, {y}) is on the wall: {h}");
             assert!(
                 (f - cl(beside, 10.0)).abs() < 0.05,
