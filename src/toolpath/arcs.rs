@@ -407,12 +407,13 @@ mod tests {
                 let band = tol * (1.0 + slope * slope).sqrt();
                 assert!(z - p.z <= band + 1e-12, "over the band at x {}", p.x);
             }
-            // never more moves than straight merging; fewer where GRBL's
-            // own chords (sagitta up to 4.5 um) leave the band room
+            // never more moves than the fewest straight ones; fewer where
+            // GRBL's own chords (sagitta up to 4.5 um) leave the band room
+            // (at 0.02 mm: 15 against 19, and 20 fixing each move's end)
             let (runs, lines) = (runs_of(&fitted), merge(&pts, tol).len() - 1);
             assert!(runs <= lines, "tol {tol}: {runs} moves vs {lines}");
             if tol >= 0.02 {
-                assert!(runs * 4 <= lines * 3, "tol {tol}: {runs} moves vs {lines}");
+                assert!(runs * 5 <= lines * 4, "tol {tol}: {runs} moves vs {lines}");
             }
         }
     }

@@ -6,6 +6,7 @@ pub mod along;
 pub mod arcs;
 pub mod contour_arcs;
 pub mod dropcutter;
+pub mod fewest;
 pub mod path;
 pub mod pencil;
 pub mod raster;
