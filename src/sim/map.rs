@@ -218,11 +218,11 @@ pub fn picture(dev: &Grid<f32>, scale: f64) -> (usize, usize, Vec<u8>) {
     (c.w, c.h, c.rgb)
 }
 
-/// The largest finishing stepover a relievo job's header states (mm).
+/// The largest finishing stepover a relievo job states (mm): in its
+/// header, or where a job that roughs first changes to the finishing tool.
 pub fn finishing_stepover(job: &str) -> Option<f64> {
     job.lines()
-        .take_while(|l| l.starts_with('('))
-        .filter(|l| l.contains("strategy: finishing"))
+        .filter(|l| l.starts_with("(strategy: finishing"))
         .filter_map(|l| {
             let rest = l.split("stepover ").nth(1)?;
             rest.split(' ').next()?.parse::<f64>().ok()
@@ -286,11 +286,15 @@ mod tests {
         assert!((65..80).any(|y| (8..60).any(|x| px(x, y) == [255, 255, 255])));
     }
 
+    /// A job that roughs first states its finishing strategy at the tool
+    /// change, after the roughing's moves: the default carve's map beat
+    /// into bands when only the header was read.
     #[test]
-    fn stepovers_from_the_header() {
+    fn stepovers_from_every_strategy_line() {
         let job = "(strategy: roughing, layers 1.290 mm, stepover 1.270 mm, stock)\n\
+                   G0 Z5\nG1 X10 Z-1\nM0\n\
                    (strategy: finishing, raster zigzag, angle 0 deg, stepover 0.3175 mm +)\n\
-                   G0 Z5\n(strategy: finishing, stepover 9 mm)\n";
+                   G1 X0\n(strategy: finishing, raster, stepover 0.1 mm)\n";
         assert_eq!(finishing_stepover(job), Some(0.3175));
         assert_eq!(finishing_stepover("G0 X1\n"), None);
     }
