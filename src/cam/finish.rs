@@ -6,7 +6,7 @@ use crate::gcode::emit::Settings;
 use crate::relief::Relief;
 use crate::tool::Tool;
 use crate::toolpath::dropcutter::HeightField;
-use crate::toolpath::{contour_arcs, path, pencil, raster, rough, waterline, Pass};
+use crate::toolpath::{contour_arcs, merge, path, pencil, raster, rough, waterline, Pass};
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -160,7 +160,7 @@ impl ToolpathJob {
         let lines: Vec<Vec<DVec3>> = pencil::lines(hf, tool, region, floor, kappa, keep)
             .par_iter()
             .map(|l| {
-                let m = path::merge(l, self.tolerance);
+                let m = merge::merge(l, self.tolerance);
                 path::check_and_refine(hf, tool, &m, floor, self.tolerance, None)
             })
             .collect();

@@ -12,7 +12,7 @@ use crate::sim;
 use crate::timing::Timings;
 use crate::tool::Tool;
 use crate::toolpath::dropcutter::HeightField;
-use crate::toolpath::{path, rough, waterline, Pass};
+use crate::toolpath::{merge, path, rough, waterline, Pass};
 use deliver::Made;
 use std::path::{Path, PathBuf};
 
@@ -852,7 +852,7 @@ impl ToolpathJob {
         passes
             .into_iter()
             .map(|p| Pass {
-                pts: path::verify(hf, tool, &path::merge(&p.pts, self.tolerance), false),
+                pts: path::verify(hf, tool, &merge::merge(&p.pts, self.tolerance), false),
                 clear_z: p.clear_z,
             })
             .collect()

@@ -8,7 +8,7 @@
 //! gouge added) and within `tol` of it. Stretches no arc spans are merged
 //! into straight moves as before.
 
-use super::path::merge;
+use super::merge::merge;
 use crate::gcode::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
 use glam::DVec3;
 

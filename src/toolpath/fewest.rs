@@ -248,7 +248,7 @@ pub fn row(points: &[DVec3], tol: f64) -> Option<Vec<DVec3>> {
 mod tests {
     use super::*;
 
-    use crate::toolpath::path::{merge, merge_fixed, merge_tests};
+    use crate::toolpath::merge::{merge, merge_fixed, merge_tests};
 
     /// Every move clears every point it passes and stays within the
     /// tolerance of it; and straight rows take fewer moves than fixing

@@ -7,6 +7,7 @@ pub mod arcs;
 pub mod contour_arcs;
 pub mod dropcutter;
 pub mod fewest;
+pub mod merge;
 pub mod path;
 pub mod pencil;
 pub mod raster;

@@ -3,7 +3,8 @@
 //! whole raster is one continuous pass.
 
 use super::dropcutter::HeightField;
-use super::path::{drop_along, merge, Refine};
+use super::merge::merge;
+use super::path::{drop_along, Refine};
 
 /// How a row's dropped points become moves: straight moves merged within
 /// the tolerance, or arcs in the row's plane where a circle fits.
