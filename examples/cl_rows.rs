@@ -1,9 +1,10 @@
 //! The finishing raster's CL rows of a relief, one point per line as
 //! `row x y z` (mm): what `bench/line_bound.py` bounds the line count of.
+//! Prints the rows' merged moves and `fewest::bound`'s count.
 //!
 //! `cargo run --release --example cl_rows -- RELIEF.png OUT.txt [TOOL] [STEPOVER_MM]`
 use relievo::error::Context;
-use relievo::toolpath::{dropcutter::HeightField, raster};
+use relievo::toolpath::{dropcutter::HeightField, fewest, merge::merge, raster};
 use std::io::{BufWriter, Write};
 
 fn main() -> relievo::Result<()> {
@@ -32,5 +33,16 @@ fn main() -> relievo::Result<()> {
             writeln!(o, "{k} {} {} {}", p.x, p.y, p.z).ctx(&a[2])?;
         }
     }
+    // the rows merged at the default tolerance against the bound
+    let tol = 0.005;
+    let moves: usize = cl
+        .iter()
+        .map(|r| merge(r, tol).len().saturating_sub(1))
+        .sum();
+    let bound: usize = cl.iter().map(|r| fewest::bound(r, tol)).sum();
+    eprintln!(
+        "{} rows: merged into {moves} moves at {tol} mm; no path within the band takes fewer than {bound}",
+        cl.len()
+    );
     Ok(())
 }

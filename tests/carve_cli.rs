@@ -245,6 +245,38 @@ fn merging_thins_the_job_fivefold() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// The demo relief's finishing rows (512 px, ball 3.175, 10% stepover)
+/// merged at 0.005 mm take within 10% of the fewest straight moves any
+/// path within the band could (`fewest::bound`): 13,117 against 12,568.
+#[test]
+fn rows_merge_near_the_fewest_moves() {
+    use relievo::toolpath::{fewest, merge::merge, raster};
+    let d = scratch("carve-bound");
+    let png = d.join("demo.png");
+    ok(&run(&["relief", "-o", png.to_str().unwrap(), "-q"]));
+    let r = relievo::relief::file::load(&png, None, None).unwrap();
+    let z = relievo::Grid::from_vec(
+        r.heights.w,
+        r.heights.h,
+        r.heights.data.iter().map(|v| *v as f64).collect(),
+    );
+    let hf = HeightField::new(z, r.pitch_mm());
+    let tool = Tool::parse("ball:3.175").unwrap();
+    let step = raster::point_spacing(&hf, &tool);
+    let rows = raster::rows(r.width_mm, r.height_mm, 0.0, 0.3175, step);
+    let cl = raster::drop_rows(&hf, &tool, &rows, -1e3);
+    let tol = 0.005;
+    let moves: usize = cl.iter().map(|r| merge(r, tol).len() - 1).sum();
+    let bound: usize = cl.iter().map(|r| fewest::bound(r, tol)).sum();
+    eprintln!("{} rows: {moves} moves, at least {bound}", cl.len());
+    assert!(bound > 5000, "{bound}");
+    assert!(
+        moves * 10 <= bound * 11,
+        "{moves} moves against at least {bound}"
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 #[test]
 fn spot_finish_is_clean() {
     judge("carve-spot", Some(&fixture("spot.obj")));
