@@ -81,7 +81,8 @@ pub struct CutOpts {
     /// tool change.
     #[arg(long, requires = "rough")]
     pub split: bool,
-    /// Merge collinear points within this distance, mm.
+    /// Merge dropped points into moves that pass within this distance above
+    /// them (never below), mm.
     #[arg(long, default_value_t = 0.005)]
     pub tolerance: f64,
     /// Arcs: G2/G3 where a circle fits within the tolerance, for
