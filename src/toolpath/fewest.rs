@@ -55,6 +55,51 @@ fn clip(p: &Poly, h: &Half, slack: f64) -> Poly {
     out
 }
 
+/// `p` clipped to every half-plane of `hs` (empty as soon as one empties it).
+fn clip_all(p: &Poly, hs: &[Half], slack: f64) -> Poly {
+    let mut out = p.clone();
+    for h in hs {
+        out = clip(&out, h, slack);
+        if out.is_empty() {
+            break;
+        }
+    }
+    out
+}
+
+/// Every move from heights `lo..=hi`, any slope short of vertical.
+fn any_move(lo: f64, hi: f64) -> Poly {
+    vec![
+        [lo, -STEEPEST],
+        [hi, -STEEPEST],
+        [hi, STEEPEST],
+        [lo, STEEPEST],
+    ]
+}
+
+/// Each point's distance along the line from the first point to the
+/// last, and whether they all lie on it, each no nearer the first than
+/// the one before.
+fn along(points: &[DVec3]) -> (Vec<f64>, bool) {
+    let first = points[0];
+    let d = (points[points.len() - 1] - first).truncate();
+    let len = d.length();
+    let dir = if len > 0.0 {
+        d / len
+    } else {
+        glam::DVec2::ZERO
+    };
+    let mut straight = dir != glam::DVec2::ZERO;
+    let mut u: Vec<f64> = Vec::with_capacity(points.len());
+    for p in points {
+        let v = (*p - first).truncate();
+        let d = v.dot(dir);
+        straight &= v.perp_dot(dir).abs() <= 1e-6 && u.last().is_none_or(|&l| d >= l);
+        u.push(d);
+    }
+    (u, straight)
+}
+
 /// The two half-planes point (du, z) puts on a move starting at `du` = 0.
 fn halves(du: f64, z: f64, a0: f64, tol: f64) -> [Half; 2] {
     // tangent of sqrt(1 + s^2) at the chord slope from the lowest start
@@ -120,32 +165,13 @@ struct Move {
 /// point, no move below a dropped point. None when the points are not
 /// such a row.
 pub fn row(points: &[DVec3], tol: f64) -> Option<Vec<DVec3>> {
-    let (first, last) = (points[0], *points.last()?);
-    let d = (last - first).truncate();
-    let len = d.length();
-    if len == 0.0 {
+    let first = *points.first()?;
+    let (u, straight) = along(points);
+    if !straight {
         return None;
-    }
-    let dir = d / len;
-    let mut u = Vec::with_capacity(points.len());
-    for p in points {
-        let v = (*p - first).truncate();
-        let along = v.dot(dir);
-        if v.perp_dot(dir).abs() > 1e-6 || u.last().is_some_and(|&l| along < l) {
-            return None;
-        }
-        u.push(along);
     }
     let slack = 1e-12 * (1.0 + tol);
     let z = |i: usize| points[i].z;
-    let start_poly = |lo: f64, hi: f64| -> Poly {
-        vec![
-            [lo, -STEEPEST],
-            [hi, -STEEPEST],
-            [hi, STEEPEST],
-            [lo, STEEPEST],
-        ]
-    };
     // the greedy pass; `seen[i]` is the move's polygon up to point
     // from + 1 + i
     let mut moves: Vec<Move> = Vec::new();
@@ -154,14 +180,8 @@ pub fn row(points: &[DVec3], tol: f64) -> Option<Vec<DVec3>> {
     let mut k = 1;
     loop {
         if k < points.len() {
-            let du = u[k] - u[from];
-            let mut next = seen.last().cloned().unwrap_or_else(|| start_poly(lo, hi));
-            for h in halves(du, z(k), lo, tol) {
-                next = clip(&next, &h, slack);
-                if next.is_empty() {
-                    break;
-                }
-            }
+            let last = seen.last().cloned().unwrap_or_else(|| any_move(lo, hi));
+            let next = clip_all(&last, &halves(u[k] - u[from], z(k), lo, tol), slack);
             if !next.is_empty() {
                 seen.push(next);
                 k += 1;
@@ -262,12 +282,7 @@ pub fn bound(points: &[DVec3], tol: f64) -> usize {
     if n < 2 {
         return 0;
     }
-    let (first, last) = (points[0], points[n - 1]);
-    let dir = (last - first).truncate().normalize_or_zero();
-    let u: Vec<f64> = points
-        .iter()
-        .map(|p| (*p - first).truncate().dot(dir))
-        .collect();
+    let u = along(points).0;
     let z = |i: usize| points[i].z;
     let band = |i: usize| {
         let (a, b) = (i.saturating_sub(1), (i + 1).min(n - 1));
@@ -278,22 +293,15 @@ pub fn bound(points: &[DVec3], tol: f64) -> usize {
     let (mut from, mut count) = (0usize, 0usize);
     while from < n - 1 {
         // lines by their height over the run's first point and slope
-        let mut poly: Poly = vec![
-            [z(from), -STEEPEST],
-            [z(from) + band(from), -STEEPEST],
-            [z(from) + band(from), STEEPEST],
-            [z(from), STEEPEST],
-        ];
+        let mut poly = any_move(z(from), z(from) + band(from));
         let mut end = from + 1;
         for e in from + 1..n {
             let du = u[e] - u[from];
-            let mut next = poly.clone();
-            for h in [[-1.0, -du, -z(e)], [1.0, du, z(e) + band(e)]] {
-                next = clip(&next, &h, 1e-12);
-                if next.is_empty() {
-                    break;
-                }
-            }
+            let next = clip_all(
+                &poly,
+                &[[-1.0, -du, -z(e)], [1.0, du, z(e) + band(e)]],
+                1e-12,
+            );
             if next.is_empty() {
                 break;
             }
