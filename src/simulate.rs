@@ -247,6 +247,7 @@ impl SimulateJob {
         let mut cut = Grid::new(w, h, 0.0f32);
         let mut engagement = sim::Engagement::default();
         let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
+        let mut time_by_tool: Vec<(String, f64)> = Vec::new();
         let mut last_tool = None;
         let travel_origin = self.travel_origin.unwrap_or((x0, y0));
         for (what, prog, offset) in progs.iter_mut() {
@@ -276,7 +277,23 @@ impl SimulateJob {
             engagement.absorb(sim::Engagement::measure(prog, &moves, &runs, stock.pitch));
             // lines are numbered per file; a second file's follow on
             rapids.extend(r.iter().map(|n| n + lines));
-            time_s += t.time("time estimate", || sim::estimate_time(prog, &machine));
+            // the estimate by tool: each run from its (tool: ..) comment
+            // (one run when --tool overrides them)
+            let starts: Vec<usize> = if runs.len() == prog.tool_lines.len() {
+                prog.tool_lines.iter().map(|l| l - 1).collect()
+            } else {
+                vec![0]
+            };
+            let parts = t.time("time estimate", || {
+                sim::time_by_part(prog, &machine, &starts)
+            });
+            for (r, secs) in runs.iter().zip(parts) {
+                time_s += secs;
+                match time_by_tool.last_mut() {
+                    Some(last) if last.0 == r.2.spec() => last.1 += secs,
+                    _ => time_by_tool.push((r.2.spec(), secs)),
+                }
+            }
             lines += prog.lines;
         }
         let tool = last_tool.expect("at least one job");
@@ -300,6 +317,7 @@ impl SimulateJob {
             rapids_in_stock: rapids,
             out_of_travel,
             time_s,
+            time_by_tool,
             lines,
             engagement,
             frame: frame.map(|f| f.comment()),

@@ -61,8 +61,60 @@ fn default_jobs_stay_within_the_depth_of_cut_and_never_plunge() {
         );
         assert!(rep["rapids_in_stock"].as_array().unwrap().is_empty());
         assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001);
+        // the time by tool, as the header states it and simulate finds it
+        let by_tool: Vec<(String, f64)> = rep["time_by_tool"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| (p[0].as_str().unwrap().to_string(), p[1].as_f64().unwrap()))
+            .collect();
+        let total = rep["time_s"].as_f64().unwrap();
+        let sum: f64 = by_tool.iter().map(|p| p.1).sum();
+        assert!((sum - total).abs() < 1e-6, "{by_tool:?} vs {total}");
+        let header = std::fs::read_to_string(d.join("job.nc")).unwrap();
+        let est: String = header
+            .lines()
+            .skip_while(|l| !l.starts_with("(estimated time:"))
+            .take_while(|l| l.starts_with('('))
+            .map(|l| l.trim_matches(|c| c == '(' || c == ')').trim())
+            .collect::<Vec<_>>()
+            .join(" ");
+        eprintln!("{model:?}: {est}");
+        let parts: Vec<(String, f64)> = est
+            .split_once(": ")
+            .and_then(|(_, rest)| rest.split_once(": "))
+            .expect("the estimate split by op")
+            .1
+            .split(", ")
+            .map(|p| {
+                let (name, time) = p.split_once(' ').unwrap();
+                let (tool, time) = time.split_once(' ').unwrap();
+                (format!("{name} {tool}"), hms_secs(time))
+            })
+            .collect();
+        let names: Vec<&str> = parts.iter().map(|p| p.0.as_str()).collect();
+        assert_eq!(names, ["roughing flat:3.175", "finishing ball:3.175"]);
+        for ((_, h), (tool, s)) in parts.iter().zip(&by_tool) {
+            assert!((h - s).abs() <= 1.0, "{tool}: header {h} s, simulate {s} s");
+            assert!(*s > 60.0, "{tool}: {s} s");
+        }
     }
     std::fs::remove_dir_all(d).unwrap();
+}
+
+/// Seconds of "1h 02m 03s" or "2m 03s".
+fn hms_secs(t: &str) -> f64 {
+    t.split(' ')
+        .map(|p| {
+            let (n, unit) = p.split_at(p.len() - 1);
+            let n: f64 = n.parse().unwrap();
+            match unit {
+                "h" => 3600.0 * n,
+                "m" => 60.0 * n,
+                _ => n,
+            }
+        })
+        .sum()
 }
 
 /// Steep walls: the demo with a flat field and 0.5 mm steps (outline walls

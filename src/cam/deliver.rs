@@ -194,10 +194,35 @@ impl ToolpathJob {
             .filter(|n| !header_notes.contains(n))
             .cloned()
             .collect();
-        let times: Vec<f64> = progs.iter().map(|p| sim::estimate_time(p, m)).collect();
-        let estimate = |secs: f64| format!("estimated time: {} on {}", sim::hms(secs), m.name);
+        // each file's time, and its share by op: what a carver plans the
+        // tool changes and the day by
+        let parts: Vec<Vec<(String, f64)>> = progs
+            .iter()
+            .zip(op_starts.iter().zip(&texts))
+            .zip(groups)
+            .map(|((p, (starts, (_, text))), f)| {
+                let secs = sim::time_by_part(p, m, &at_headers(text, starts));
+                op_shares(f.1.iter().map(|o| (o.title, &o.tool)), &secs)
+            })
+            .collect();
+        let times: Vec<f64> = parts
+            .iter()
+            .map(|ps| ps.iter().map(|p| p.1).sum())
+            .collect();
+        let estimate = |k: usize| {
+            let split = if parts[k].len() > 1 {
+                format!(": {}", shares_text(&parts[k]))
+            } else {
+                String::new()
+            };
+            format!(
+                "estimated time: {} on {}{split}",
+                sim::hms(times[k]),
+                m.name
+            )
+        };
         let added =
-            |extra: &[String], secs: f64| comment_lines(extra) + comment_lines(&[estimate(secs)]);
+            |extra: &[String], k: usize| comment_lines(extra) + comment_lines(&[estimate(k)]);
         if self.allow_deep_cuts {
             if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.material_of(tl)) {
                 let note = |by: usize| {
@@ -210,23 +235,23 @@ impl ToolpathJob {
                     )
                 };
                 // the note's own lines count: settle the number twice
-                let mut by = added(&extra, times[k]);
+                let mut by = added(&extra, k);
                 for _ in 0..2 {
                     let with: Vec<String> = extra.iter().cloned().chain([note(by)]).collect();
-                    by = added(&with, times[k]);
+                    by = added(&with, k);
                 }
                 notes.push(note(by));
                 extra.push(note(by));
             }
         }
-        judged.engagement.shift_lines(added(&extra, times[0]));
+        judged.engagement.shift_lines(added(&extra, 0));
         let mut out = Outputs::default();
         let (mut lines, mut time_s) = (0, 0.0);
         let mut written = Vec::new();
-        for ((file, text), secs) in texts.into_iter().zip(times) {
-            time_s += secs;
+        for (k, (file, text)) in texts.into_iter().enumerate() {
+            time_s += times[k];
             let mut text = with_comments(text, &extra);
-            text = with_comments(text, &[estimate(secs)]);
+            text = with_comments(text, &[estimate(k)]);
             // counted as written: a wrapped comment takes several lines
             lines += text.lines().count();
             out.add(&file, text.into_bytes());
@@ -252,6 +277,7 @@ impl ToolpathJob {
             lines,
             raw_points,
             time_s,
+            time_by_op: merge_shares(parts.into_iter().flatten()),
             stepover_mm: step,
             written,
             notes,
@@ -469,6 +495,58 @@ impl ToolpathJob {
         }
         (e.finish(&ops[ops.len() - 1].settings), starts)
     }
+}
+
+/// Each op's start moved on to its header's first comment, so that the
+/// retract and spindle stop before a tool change count with the tool
+/// that made them, as `simulate` counts them by the (tool: ..) comments.
+fn at_headers(text: &str, starts: &[usize]) -> Vec<usize> {
+    let lines: Vec<&str> = text.lines().collect();
+    starts
+        .iter()
+        .enumerate()
+        .map(|(k, &s)| {
+            if k == 0 {
+                return 0;
+            }
+            (s..lines.len())
+                .find(|&i| lines[i].starts_with('('))
+                .unwrap_or(s)
+        })
+        .collect()
+}
+
+/// Seconds per op merged where neighbouring ops share title and tool:
+/// ("roughing flat:3.175", seconds), in job order.
+fn op_shares<'a>(
+    ops: impl Iterator<Item = (&'a str, &'a Tool)>,
+    secs: &[f64],
+) -> Vec<(String, f64)> {
+    merge_shares(
+        ops.zip(secs)
+            .map(|((title, tool), &s)| (format!("{title} {}", tool.spec()), s)),
+    )
+}
+
+/// Neighbouring shares of the same name added together.
+fn merge_shares(shares: impl Iterator<Item = (String, f64)>) -> Vec<(String, f64)> {
+    let mut out: Vec<(String, f64)> = Vec::new();
+    for (name, s) in shares {
+        match out.last_mut() {
+            Some(last) if last.0 == name => last.1 += s,
+            _ => out.push((name, s)),
+        }
+    }
+    out
+}
+
+/// "roughing flat:3.175 1h 02m 10s, finishing ball:3.175 58m 03s".
+pub fn shares_text(shares: &[(String, f64)]) -> String {
+    shares
+        .iter()
+        .map(|(name, s)| format!("{name} {}", sim::hms(*s)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// How many lines `with_comments` adds for `notes`.

@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 mod boundary;
 pub mod cutout;
 mod deliver;
+pub use deliver::shares_text;
 mod finish;
 mod judge;
 pub mod layout;
@@ -207,6 +208,9 @@ pub struct CamSummary {
     /// CL points before merging (one line each if unmerged).
     pub raw_points: usize,
     pub time_s: f64,
+    /// The estimate by op (tool changes between), in job order: ("roughing
+    /// flat:3.175", seconds); a split job's files in turn.
+    pub time_by_op: Vec<(String, f64)>,
     pub stepover_mm: f64,
     /// Every file written, the job first.
     pub written: Vec<PathBuf>,

@@ -255,8 +255,13 @@ pub fn report(s: &relievo::cam::CamSummary, quiet: bool, verbose: bool) {
             s.residual.0,
             s.residual.1
         );
+        let split = if s.time_by_op.len() > 1 {
+            format!(" ({})", relievo::cam::shares_text(&s.time_by_op))
+        } else {
+            String::new()
+        };
         eprintln!(
-            "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}",
+            "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}{split}",
             s.written
                 .iter()
                 .map(|p| p.display().to_string())

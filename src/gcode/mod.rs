@@ -37,6 +37,9 @@ pub struct Program {
     pub segments: Vec<Segment>,
     /// Seconds of G4 dwell.
     pub dwell_s: f64,
+    /// Each dwell: its 1-based line and seconds (for a time split by
+    /// lines).
+    pub dwells: Vec<(usize, f64)>,
     /// Lines in the file.
     pub lines: usize,
     /// Tool spec from the first `(tool: SPEC ...)` comment, if any.
@@ -44,6 +47,8 @@ pub struct Program {
     /// Every `(tool: SPEC ...)` comment: the index of the first segment it
     /// cuts and its spec (a tool change starts a new one).
     pub tools: Vec<(usize, String)>,
+    /// The 1-based line of each of those comments.
+    pub tool_lines: Vec<usize>,
 }
 
 impl Program {
@@ -129,6 +134,7 @@ pub fn program(text: &str) -> Result<Program> {
                 if let Some(spec) = rest.split_whitespace().next() {
                     p.tool.get_or_insert_with(|| spec.to_string());
                     p.tools.push((p.segments.len(), spec.to_string()));
+                    p.tool_lines.push(l.number);
                 }
             }
         }
@@ -143,7 +149,10 @@ pub fn program(text: &str) -> Result<Program> {
             );
         }
         stop |= step.sync;
-        p.dwell_s += step.dwell.unwrap_or(0.0);
+        if let Some(d) = step.dwell {
+            p.dwell_s += d;
+            p.dwells.push((n, d));
+        }
         let Some(target) = step.to else { continue };
         let (mut pos, motion) = (step.from, step.motion);
         let kind = if motion == 0 { Kind::Rapid } else { Kind::Feed };

@@ -94,6 +94,9 @@ pub struct Report {
     pub rapids_in_stock: Vec<usize>,
     pub out_of_travel: Vec<usize>,
     pub time_s: f64,
+    /// The estimate by tool, in job order (a tool's runs between changes
+    /// to other tools apart).
+    pub time_by_tool: Vec<(String, f64)>,
     pub lines: usize,
     /// Per tool: largest axial depth of cut, radial engagement and
     /// slotting depth, with their lines; plunges into material.
@@ -143,7 +146,16 @@ impl Report {
             list(&self.out_of_travel),
             hms(self.time_s),
             self.lines
-        ) + "\n"
+        ) + &if self.time_by_tool.len() > 1 {
+            let by: Vec<String> = self
+                .time_by_tool
+                .iter()
+                .map(|(tool, s)| format!("{tool} {}", hms(*s)))
+                .collect();
+            format!(": {}", by.join(", "))
+        } else {
+            String::new()
+        } + "\n"
             + &self.engagement.summary()
     }
 }
@@ -528,6 +540,19 @@ pub fn line_times(prog: &Program, m: &Machine) -> Vec<(usize, f64)> {
     out
 }
 
+/// The estimate split into parts of the job: part k holds the lines after
+/// the first `starts[k]` (starts ascending, the first 0), its moves and
+/// its dwells. The parts sum to `estimate_time`.
+pub fn time_by_part(prog: &Program, m: &Machine, starts: &[usize]) -> Vec<f64> {
+    let part = |line: usize| starts.iter().rposition(|&s| s < line).unwrap_or(0);
+    let mut out = vec![0.0; starts.len().max(1)];
+    for &(line, s) in &prog.dwells {
+        out[part(line)] += s;
+    }
+    timed(prog, m, |k, dt| out[part(prog.segments[k].line)] += dt);
+    out
+}
+
 /// The estimate, calling `each(segment, seconds)` for every move of some
 /// length.
 fn timed(prog: &Program, m: &Machine, mut each: impl FnMut(usize, f64)) -> f64 {
@@ -865,5 +890,21 @@ mod tests {
         let t = estimate_time(&prog, &m);
         let want = 0.5 + 0.5 + (100.0 - 2.0 * 1.25) / 5.0;
         assert!((t - want).abs() < 1e-9, "{t} vs {want}");
+    }
+
+    #[test]
+    fn time_by_part_splits_moves_and_dwells_at_the_lines_given() {
+        let m = Machine::load("grbl-generic").unwrap();
+        // two 100 mm moves with a full stop and a 2 s dwell between them
+        let prog = program("G1 X100 F300\nM5\n(two)\nG4 P2\nG1 X0\n").unwrap();
+        let one = 0.5 + 0.5 + (100.0 - 2.0 * 1.25) / 5.0;
+        let parts = time_by_part(&prog, &m, &[0, 2]);
+        assert!((parts[0] - one).abs() < 1e-9, "{parts:?}");
+        assert!((parts[1] - (one + 2.0)).abs() < 1e-9, "{parts:?}");
+        let total = estimate_time(&prog, &m);
+        assert!((parts.iter().sum::<f64>() - total).abs() < 1e-9);
+        // a start past the dwell leaves it to the first part
+        let parts = time_by_part(&prog, &m, &[0, 4]);
+        assert!((parts[0] - (one + 2.0)).abs() < 1e-9, "{parts:?}");
     }
 }

@@ -310,7 +310,11 @@ fn job_packet(j: &super::work::JobMade) -> Reply {
     Reply::binary(
         Packet::new(json!({
             "lines": s.lines,
-            "time": crate::sim::hms(s.time_s),
+            "time": if s.time_by_op.len() > 1 {
+                format!("{} ({})", crate::sim::hms(s.time_s), crate::cam::shares_text(&s.time_by_op))
+            } else {
+                crate::sim::hms(s.time_s)
+            },
             "time_s": s.time_s,
             "gouge_mm": rep.max_gouge_mm,
             "residual_mm": [rep.max_residual_mm, rep.mean_residual_mm],
