@@ -306,7 +306,10 @@ impl ReliefJob {
     ) -> Result<(Relief, Vec<String>)> {
         let stencils = self.stencils(field, objects)?;
         let relief = relief::build(field, p, &stencils, t)?;
-        let warnings = relief::flatness(&relief, field).into_iter().collect();
+        let warnings = relief::flatness(&relief, field)
+            .into_iter()
+            .chain(relief::background_rise(&relief, field, p))
+            .collect();
         Ok((relief, warnings))
     }
 

@@ -689,3 +689,66 @@ fn outline_ends_leave_no_flares() {
         }
     }
 }
+
+/// A free background rises and falls round the subject by what its
+/// outline heights differ; past a fifth of the depth the relief says so,
+/// with the figure the relief shows, and `--flat-background` holds it at
+/// 0 (and is not told again). A tilt slopes the field on purpose.
+#[test]
+fn a_rising_free_background_is_said() {
+    let d = scratch("background-rise");
+    let bunny = shared_model("stanford-bunny.obj");
+    let relief = |extra: &[&str], out: &str| {
+        let o = d.join(out);
+        let os = o.display().to_string();
+        let mut a = vec!["relief", &bunny, "--resolution", "128", "-o", &os];
+        a.extend_from_slice(extra);
+        let r = run(&a);
+        ok(&r);
+        String::from_utf8_lossy(&r.stderr).to_string()
+    };
+    let depth_out = d.join("depth.png").display().to_string();
+    let said = relief(&["--depth-out", &depth_out], "free.png");
+    // the background's middle 98% as the PNG shows it
+    let (_, _, v, depth) = common::relief_mm(&d.join("free.png"));
+    let (_, _, dep) = read_png16(&d.join("depth.png"));
+    let mut bg: Vec<f64> = v
+        .iter()
+        .zip(&dep)
+        .filter(|(_, &z)| z == 0)
+        .map(|(h, _)| *h)
+        .collect();
+    bg.sort_by(f64::total_cmp);
+    let k = bg.len() / 100;
+    let spread = bg[bg.len() - 1 - k] - bg[k];
+    eprintln!("{said}background spread {spread:.3} mm of {depth} mm");
+    let line = said
+        .lines()
+        .find(|l| l.contains("free background rises and falls by"))
+        .unwrap_or_else(|| panic!("not said: {said}"));
+    let figure: f64 = line
+        .split("by ")
+        .nth(1)
+        .and_then(|s| s.split(' ').next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(spread > 0.2 * depth, "{spread}");
+    assert!(
+        (figure - spread).abs() < 0.05,
+        "said {figure}, measured {spread}"
+    );
+    let flat = relief(&["--flat-background"], "flat.png");
+    assert!(!flat.contains("free background"), "{flat}");
+    let (_, _, fv, _) = common::relief_mm(&d.join("flat.png"));
+    let worst = fv
+        .iter()
+        .zip(&dep)
+        .filter(|(_, &z)| z == 0)
+        .map(|(h, _)| *h)
+        .fold(0.0f64, f64::max);
+    assert!(worst < 1e-3, "flat background up to {worst} mm");
+    let tilted = relief(&["--tilt", "1"], "tilt.png");
+    assert!(!tilted.contains("free background"), "{tilted}");
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -295,18 +295,58 @@ pub fn flatness(r: &Relief, field: &Field) -> Option<String> {
     if hi - lo <= 1e-6 * r.depth_mm as f32 {
         return Some(format!("the relief is flat: {why}"));
     }
-    let k = fg.len() / 100;
-    let top = fg.len() - 1 - k;
-    let high = *fg.select_nth_unstable_by(top, f32::total_cmp).1;
-    let lows = &mut fg[..top.max(1)];
-    let low = *lows
-        .select_nth_unstable_by(k.min(lows.len() - 1), f32::total_cmp)
-        .1;
-    let spread = (high - low) as f64;
+    let spread = spread98(&mut fg);
     // shipped models keep 80-95% of the depth in 98% of the subject
     (spread < 0.5 * r.depth_mm).then(|| {
         format!(
             "the relief is nearly flat: 98% of the subject lies within {spread:.2} mm of the {} mm depth; {why}",
+            r.depth_mm
+        )
+    })
+}
+
+/// The range the middle 98% of `v` spans (1st to 99th percentile), by
+/// selection; `v` is reordered.
+fn spread98(v: &mut [f32]) -> f64 {
+    let k = v.len() / 100;
+    let top = v.len() - 1 - k;
+    let high = *v.select_nth_unstable_by(top, f32::total_cmp).1;
+    let lows = &mut v[..top.max(1)];
+    let low = *lows
+        .select_nth_unstable_by(k.min(lows.len() - 1), f32::total_cmp)
+        .1;
+    (high - low) as f64
+}
+
+/// A free background is not a flat field: where the subject's outline
+/// heights differ (its own slopes say they must), the least-squares
+/// solve carries them into the background, which rises and falls around
+/// the subject (2-3 mm of a 5 mm bunny, teapot or Spot) and takes that
+/// much of the depth from the subject. Said when the middle 98% of the
+/// background spans more than a fifth of the depth.
+pub fn background_rise(r: &Relief, field: &Field, p: &Params) -> Option<String> {
+    // a tilt or fade slopes the field on purpose
+    if p.flat_background || p.method != Method::Gradient || p.tilt.is_some() || p.fade.is_some() {
+        return None;
+    }
+    let mut bg: Vec<f32> = r
+        .heights
+        .data
+        .iter()
+        .zip(&field.mask.data)
+        .filter(|(_, &m)| !m)
+        .map(|(h, _)| *h)
+        .collect();
+    // a frame's margin round a scene that fills the view (the demo's
+    // plane: 10% of it) is not a field to carve
+    if bg.len() < r.heights.data.len() / 5 {
+        return None;
+    }
+    let spread = spread98(&mut bg);
+    (spread > 0.2 * r.depth_mm).then(|| {
+        format!(
+            "the free background rises and falls by {spread:.2} mm of the {} mm depth around the subject; \
+             --flat-background holds it flat at 0 and leaves the depth to the subject",
             r.depth_mm
         )
     })

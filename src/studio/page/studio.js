@@ -132,8 +132,11 @@ const askRelief = scheduler(async () => {
   if (!p) return;
   const got = performance.now();
   S.relief = p;
-  for (const w of p.head.warnings) status('warning: ' + w, true);
-  if (!p.head.warnings.length) status(`relief ${p.head.pixels[0]} × ${p.head.pixels[1]} px, ${p.head.width_mm.toFixed(1)} × ${p.head.height_mm.toFixed(1)} × ${p.head.depth_mm.toFixed(2)} mm`);
+  // warnings beside the status, not as errors: the relief is made
+  const warned = p.head.warnings.map((w) => 'warning: ' + w).join(' · ');
+  $('warning').textContent = warned;
+  $('warning').title = warned;
+  status(`relief ${p.head.pixels[0]} × ${p.head.pixels[1]} px, ${p.head.width_mm.toFixed(1)} × ${p.head.height_mm.toFixed(1)} × ${p.head.depth_mm.toFixed(2)} mm`);
   $('command').textContent = p.head.command + (S.job ? '\n' + S.job.head.command : '');
   gfx.setField('relief', p.head.w, p.head.h, p.arrays.heights, null);
   const t1 = performance.now();
