@@ -691,7 +691,8 @@ fn outline_ends_leave_no_flares() {
 }
 
 /// A free background rises and falls round the subject by what its
-/// outline heights differ; past a fifth of the depth the relief says so,
+/// outline heights differ; past a fifth of the depth the relief says so
+/// (the demo, whose plane fills the view, is not told),
 /// with the figure the relief shows, and `--flat-background` holds it at
 /// 0 (and is not told again). A tilt slopes the field on purpose.
 #[test]
@@ -709,14 +710,17 @@ fn a_rising_free_background_is_said() {
     };
     let depth_out = d.join("depth.png").display().to_string();
     let said = relief(&["--depth-out", &depth_out], "free.png");
-    // the background's middle 98% as the PNG shows it
-    let (_, _, v, depth) = common::relief_mm(&d.join("free.png"));
+    // the background's middle 98% as the PNG shows it, inside the
+    // frame's margin (2.5% of the long side, at least 3 px, and one more)
+    let (w, h, v, depth) = common::relief_mm(&d.join("free.png"));
     let (_, _, dep) = read_png16(&d.join("depth.png"));
-    let mut bg: Vec<f64> = v
-        .iter()
-        .zip(&dep)
-        .filter(|(_, &z)| z == 0)
-        .map(|(h, _)| *h)
+    let band = ((0.025 * w.max(h) as f64).ceil() as usize).max(3) + 1;
+    let mut bg: Vec<f64> = (0..v.len())
+        .filter(|&i| {
+            let (x, y) = (i % w, i / w);
+            dep[i] == 0 && x >= band && y >= band && x + band < w && y + band < h
+        })
+        .map(|i| v[i])
         .collect();
     bg.sort_by(f64::total_cmp);
     let k = bg.len() / 100;
@@ -748,6 +752,16 @@ fn a_rising_free_background_is_said() {
         .map(|(h, _)| *h)
         .fold(0.0f64, f64::max);
     assert!(worst < 1e-3, "flat background up to {worst} mm");
+    for res in ["32", "256"] {
+        let o = d.join("demo.png").display().to_string();
+        let r = run(&["relief", "--resolution", res, "-o", &o]);
+        ok(&r);
+        let said = String::from_utf8_lossy(&r.stderr).to_string();
+        assert!(
+            !said.contains("free background"),
+            "demo at {res} px: {said}"
+        );
+    }
     let tilted = relief(&["--tilt", "1"], "tilt.png");
     assert!(!tilted.contains("free background"), "{tilted}");
     std::fs::remove_dir_all(d).unwrap();

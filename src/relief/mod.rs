@@ -329,17 +329,20 @@ pub fn background_rise(r: &Relief, field: &Field, p: &Params) -> Option<String> 
     if p.flat_background || p.method != Method::Gradient || p.tilt.is_some() || p.fade.is_some() {
         return None;
     }
-    let mut bg: Vec<f32> = r
-        .heights
-        .data
-        .iter()
-        .zip(&field.mask.data)
-        .filter(|(_, &m)| !m)
-        .map(|(h, _)| *h)
-        .collect();
-    // a frame's margin round a scene that fills the view (the demo's
-    // plane: 10% of it) is not a field to carve
-    if bg.len() < r.heights.data.len() / 5 {
+    // the background inside the margin the camera frames every scene
+    // with (2% of its extent, at least 2.5 px): a scene that fills the
+    // view (the demo's plane) has none, and its margin is no field
+    let (w, h) = (r.heights.w, r.heights.h);
+    let band = ((0.025 * w.max(h) as f64).ceil() as usize).max(3) + 1;
+    let mut bg: Vec<f32> = Vec::new();
+    for y in band..h.saturating_sub(band) {
+        for x in band..w.saturating_sub(band) {
+            if !*field.mask.get(x, y) {
+                bg.push(*r.heights.get(x, y));
+            }
+        }
+    }
+    if bg.len() < w * h / 10 {
         return None;
     }
     let spread = spread98(&mut bg);
