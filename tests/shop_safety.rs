@@ -59,6 +59,20 @@ fn default_jobs_stay_within_the_depth_of_cut_and_never_plunge() {
             stdout.contains("roughing added with T1 (flat:3.175)"),
             "{stdout}"
         );
+        // carve judges on simulate's own cells: the figures it prints
+        // are the ones simulate finds in the written job
+        for t in e["tools"].as_array().unwrap() {
+            let said = format!(
+                "{}: depth of cut up to {:.3} mm (line {})",
+                t["tool"].as_str().unwrap(),
+                t["max_axial_mm"].as_f64().unwrap(),
+                t["axial_line"]
+            );
+            assert!(
+                stdout.contains(&said),
+                "{model:?}: '{said}' not in {stdout}"
+            );
+        }
         assert!(rep["rapids_in_stock"].as_array().unwrap().is_empty());
         assert!(rep["max_gouge_mm"].as_f64().unwrap() < 0.001);
         // the time by tool, as the header states it and simulate finds it

@@ -143,7 +143,24 @@ impl ToolpathJob {
             .zip(&files)
             .map(|(p, f)| p.moved(plan.shift - f.2.shift))
             .collect();
-        let mut judged = t.time("judge", || judge::run(&progs, relief, plan, z_shift, cell))?;
+        // judged on the cells `simulate` takes by default (a cut hides at
+        // most 1 um between their centres), so that carve reports what
+        // simulate finds: on the planning cells the top of a wall the
+        // roughing left fell between centres, and the 512 px demo's ball
+        // read 0.996 mm deep where it cuts 1.095
+        let judge_cell = {
+            let pitch = relief.pitch_mm();
+            let tools: Vec<Tool> = files
+                .iter()
+                .flat_map(|f| f.1.iter().map(|o| o.tool))
+                .collect();
+            let samples = relief.heights.w * relief.heights.h;
+            let k = crate::simulate::oversample_for(&tools, pitch, samples);
+            cell.min(pitch / k as f64)
+        };
+        let mut judged = t.time("judge", || {
+            judge::run(&progs, relief, plan, z_shift, judge_cell)
+        })?;
         let groups = &files;
         if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.of(tl)) {
             let what = format!(
