@@ -245,16 +245,13 @@ fn a_full_depth_pass_is_refused_unless_allowed() {
         &text[..1500]
     );
     // the lines named are the written file's, comments put in after the
-    // judging counted: `simulate` on the same cells (three per pixel at
-    // 120 px: at most half the tools' radius) names the very same lines
-    // and figures
+    // judging counted: `simulate` on its default cells, the ones the job
+    // was judged on, names the very same lines and figures
     let sim = run(&[
         "simulate",
         job.to_str().unwrap(),
         "--relief",
         d.join("job-relief.png").to_str().unwrap(),
-        "--oversample",
-        "3",
         "-o",
         d.join("cut.png").to_str().unwrap(),
     ]);
