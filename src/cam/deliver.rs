@@ -274,8 +274,11 @@ impl ToolpathJob {
             out.add(&file, text.into_bytes());
             written.push(file);
         }
-        // the job comes first in the list
-        written.rotate_right(1);
+        // a split job's finishing file (the one named -o, written last)
+        // comes first in the list; tiles stay in their order
+        if self.layout.tile.is_none() {
+            written.rotate_right(1);
+        }
         if let Some(svg) = &self.svg {
             let doc = t.time("svg", || view::top_view(&progs, relief, plan, z_shift));
             out.add(svg, doc.into_bytes());
@@ -294,7 +297,7 @@ impl ToolpathJob {
             lines,
             raw_points,
             time_s,
-            time_by_op: merge_shares(parts.into_iter().flatten()),
+            time_by_op: total_shares(parts.into_iter().flatten()),
             stepover_mm: step,
             written,
             notes,
@@ -552,6 +555,19 @@ fn merge_shares(shares: impl Iterator<Item = (String, f64)>) -> Vec<(String, f64
         match out.last_mut() {
             Some(last) if last.0 == name => last.1 += s,
             _ => out.push((name, s)),
+        }
+    }
+    out
+}
+
+/// Shares of the same name added together wherever they stand, in the
+/// order first met: a tiled job's roughing over all its tiles.
+fn total_shares(shares: impl Iterator<Item = (String, f64)>) -> Vec<(String, f64)> {
+    let mut out: Vec<(String, f64)> = Vec::new();
+    for (name, s) in shares {
+        match out.iter_mut().find(|o| o.0 == name) {
+            Some(o) => o.1 += s,
+            None => out.push((name, s)),
         }
     }
     out

@@ -208,8 +208,8 @@ pub struct CamSummary {
     /// CL points before merging (one line each if unmerged).
     pub raw_points: usize,
     pub time_s: f64,
-    /// The estimate by op (tool changes between), in job order: ("roughing
-    /// flat:3.175", seconds); a split job's files in turn.
+    /// The estimate by op, in job order: ("roughing flat:3.175", seconds),
+    /// an op's time in every file (tiles) added together.
     pub time_by_op: Vec<(String, f64)>,
     pub stepover_mm: f64,
     /// Every file written, the job first.
