@@ -974,6 +974,11 @@ fn a_small_finishing_tool_keeps_within_its_depth_of_cut() {
     let d = scratch("safe-small-ball");
     let (stdout, rep) = carve_judged(&d, &["--resolution", "160", "--tool", "ball:1"]);
     assert!(stdout.contains("ball:1 steps down in layers"), "{stdout}");
+    // and, its layers taking most of the job, the faster plan is named
+    assert!(
+        stdout.contains("finishing with T2 (ball:3.175) and --rest ball:1"),
+        "{stdout}"
+    );
     let e = &rep["engagement"];
     for t in e["tools"].as_array().unwrap() {
         let axial = t["max_axial_mm"].as_f64().unwrap();
