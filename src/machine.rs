@@ -157,6 +157,13 @@ impl Machine {
             .map(|(_, k, s)| (k, s))
     }
 
+    /// `tool` for the flag that named it: its errors start with the flag
+    /// and the spec ("--rough flat:0: size or angle out of range").
+    pub fn tool_for(&self, flag: &str, spec: &str) -> Result<crate::tool::Tool> {
+        self.tool(spec)
+            .map_err(|e| crate::error::Error(format!("{flag} {}", e.0)))
+    }
+
     /// A tool from the table by name (case-insensitive), else a spec.
     pub fn tool(&self, spec: &str) -> Result<crate::tool::Tool> {
         let hit = self
@@ -166,7 +173,7 @@ impl Machine {
         match hit {
             Some((_, t)) => crate::tool::Tool::parse(&t.tool),
             None if !spec.contains(':') && !self.tools.is_empty() => bail!(
-                "tool '{spec}': not a tool spec (ball:D, flat:D, ...) nor in {}'s tool table ({})",
+                "{spec}: not a tool spec (ball:D, flat:D, ...) nor in {}'s tool table ({})",
                 self.name,
                 self.tools.keys().cloned().collect::<Vec<_>>().join(", ")
             ),

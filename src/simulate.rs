@@ -192,7 +192,11 @@ impl SimulateJob {
         let relief: Relief = t.time("load relief", || {
             file::load(&self.relief, self.relief_width, self.relief_depth)
         })?;
-        let tool = self.tool.as_deref().map(Tool::parse).transpose()?;
+        let tool = self
+            .tool
+            .as_deref()
+            .map(|s| Tool::parse(s).map_err(|e| crate::Error(format!("--tool {}", e.0))))
+            .transpose()?;
         let mut tools = Vec::new();
         for (what, prog, _) in &progs {
             let runs =

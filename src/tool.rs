@@ -33,7 +33,7 @@ impl Tool {
             .collect::<std::result::Result<_, _>>()
         {
             Ok(v) => v,
-            Err(_) => bail!("--tool {spec}: numbers expected after the shape, e.g. ball:3.175"),
+            Err(_) => bail!("{spec}: numbers expected after the shape, e.g. ball:3.175"),
         };
         let ok = |v: f64, lo: f64, hi: f64| v.is_finite() && v > lo && v < hi;
         let tool = match (parts[0].to_ascii_lowercase().as_str(), nums.as_slice()) {
@@ -43,7 +43,7 @@ impl Tool {
             ("taperball", [r, a, d]) => Tool::TaperBall { tip_r: *r, half_angle: *a, d: *d },
             ("vbit", [a]) => Tool::VBit { angle: *a, d: DEFAULT_SHANK },
             ("vbit", [a, d]) => Tool::VBit { angle: *a, d: *d },
-            _ => bail!("--tool {spec}: expected ball:D, flat:D, taperball:TIP_RADIUS:HALF_ANGLE[:D] or vbit:ANGLE[:D]"),
+            _ => bail!("{spec}: expected ball:D, flat:D, taperball:TIP_RADIUS:HALF_ANGLE[:D] or vbit:ANGLE[:D]"),
         };
         let valid = match tool {
             Tool::Ball { d } | Tool::Flat { d } => ok(d, 0.0, 100.0),
@@ -55,7 +55,7 @@ impl Tool {
             Tool::VBit { angle, d } => ok(angle, 0.0, 180.0) && ok(d, 0.0, 100.0),
         };
         if !valid {
-            bail!("--tool {spec}: size or angle out of range");
+            bail!("{spec}: size or angle out of range");
         }
         Ok(tool)
     }

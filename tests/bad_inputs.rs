@@ -396,3 +396,37 @@ fn a_million_triangle_stl_makes_a_relief() {
     assert!(v.iter().filter(|&&x| x > 0).count() > w * h / 2);
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// `carve` refuses a bad job flag before it makes the relief: one error
+/// line naming the flag (not the mesh's up axis and the relief's warnings
+/// first), and no relief nor job left.
+#[test]
+fn carve_refuses_job_flags_before_the_relief() {
+    let d = scratch("bad-carve");
+    let bunny = shared_model("stanford-bunny.obj");
+    let job = d.join("job.nc");
+    for (args, names) in [
+        (vec!["--tool", "ball:0"], "--tool ball:0"),
+        (vec!["--rough", "flat:0"], "--rough flat:0"),
+        (vec!["--rest", "vbit:500"], "--rest vbit:500"),
+        (vec!["--tool", "T9"], "--tool T9"),
+        (vec!["--machine", "nosuch"], "--machine nosuch"),
+        (vec!["--angle", "nan"], "--angle"),
+        (vec!["--tolerance", "5"], "--tolerance"),
+        (vec!["--stepover", "0"], "stepover"),
+    ] {
+        let mut all = vec![
+            "carve",
+            bunny.as_str(),
+            "--resolution",
+            "48",
+            "-o",
+            job.to_str().unwrap(),
+        ];
+        all.extend(args.iter());
+        fails_with(&all, names);
+        let left: Vec<_> = std::fs::read_dir(&d).unwrap().collect();
+        assert!(left.is_empty(), "{args:?} left {left:?}");
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -296,16 +296,17 @@ const PAD: f64 = 8.0;
 const PENCIL_BEND: f64 = 0.25;
 
 impl ToolpathJob {
-    pub fn run(&self, relief: &Relief) -> Result<CamSummary> {
-        let mut t = Timings::default();
-        let rough_out = rough_path(&self.output);
-        for o in [Some(&self.output), self.svg.as_ref(), self.preview.as_ref()]
-            .into_iter()
-            .flatten()
-            .chain((self.split && self.rough.is_some()).then_some(&rough_out))
-        {
-            check_writable(o)?;
-        }
+    /// What can be refused before there is a relief: tolerance, Z zero,
+    /// machine, material, tools, stepover and angle. `carve` asks first,
+    /// so that a bad flag is one error line, not a relief's notes and then
+    /// the error; `run` asks again.
+    pub fn check(&self) -> Result<()> {
+        self.setup().map(|_| ())
+    }
+
+    /// `check`'s findings, for `run`: the machine, the material, the
+    /// finishing tool and its stepover (mm).
+    fn setup(&self) -> Result<(Machine, Option<crate::materials::Material>, Tool, f64)> {
         if !(self.tolerance > 0.0 && self.tolerance <= 1.0) {
             bail!("--tolerance {}: must be in (0, 1] mm", self.tolerance);
         }
@@ -321,6 +322,48 @@ impl ToolpathJob {
             .as_deref()
             .map(crate::materials::find)
             .transpose()?;
+        let tool = m.tool_for("--tool", &self.tool)?;
+        if let Some(r) = &self.rough {
+            m.tool_for("--rough", &r.tool)?;
+        }
+        if let Some(r) = &self.rest {
+            m.tool_for("--rest", &r.tool)?;
+        }
+        let step = self.finish_step(&tool, material.as_ref())?;
+        if !(self.angle.is_finite() && self.angle.abs() <= 360.0) {
+            bail!(
+                "--angle {}: must be a number of degrees within -360..360",
+                self.angle
+            );
+        }
+        Ok((m, material, tool, step))
+    }
+
+    /// The finishing stepover in mm: asked for, else the material's for
+    /// the tool, else 10% of its working diameter.
+    fn finish_step(
+        &self,
+        tool: &Tool,
+        material: Option<&crate::materials::Material>,
+    ) -> Result<f64> {
+        let cutting = material.and_then(|mt| mt.cutting_for(tool.working_diameter()));
+        self.stepover
+            .or(cutting.map(|c| Stepover::Percent(c.finish_stepover)))
+            .unwrap_or(Stepover::Percent(10.0))
+            .mm(tool)
+    }
+
+    pub fn run(&self, relief: &Relief) -> Result<CamSummary> {
+        let mut t = Timings::default();
+        let rough_out = rough_path(&self.output);
+        for o in [Some(&self.output), self.svg.as_ref(), self.preview.as_ref()]
+            .into_iter()
+            .flatten()
+            .chain((self.split && self.rough.is_some()).then_some(&rough_out))
+        {
+            check_writable(o)?;
+        }
+        let (m, material, tool, step) = self.setup()?;
         let limits = Limits {
             material: match &material {
                 Some(mt) => mt.clone(),
@@ -334,24 +377,7 @@ impl ToolpathJob {
         };
         let mut notes: Vec<String> = Vec::new();
         let relief = &layout::turned(relief, self.layout.rotate);
-        let tool = m.tool(&self.tool)?;
         let finish_settings = self.settings(&m, &tool, material.as_ref(), &mut notes)?;
-        let cutting = material
-            .as_ref()
-            .and_then(|mt| mt.cutting_for(tool.working_diameter()));
-        let stepover = self
-            .stepover
-            .or(cutting
-                .as_ref()
-                .map(|c| Stepover::Percent(c.finish_stepover)))
-            .unwrap_or(Stepover::Percent(10.0));
-        let step = stepover.mm(&tool)?;
-        if !(self.angle.is_finite() && self.angle.abs() <= 360.0) {
-            bail!(
-                "--angle {}: must be a number of degrees within -360..360",
-                self.angle
-            );
-        }
         // the work a finish implies, before any of it is done
         let (pw0, ph0) = (relief.width_mm, relief.height_mm);
         let rows = (pw0.hypot(ph0) / step).ceil();
@@ -376,7 +402,11 @@ impl ToolpathJob {
         let floor = -relief.depth_mm;
         let (pw, ph) = (relief.width_mm, relief.height_mm);
         let panel = [0.0, 0.0, pw, ph];
-        let rest_tool = self.rest.as_ref().map(|r| m.tool(&r.tool)).transpose()?;
+        let rest_tool = self
+            .rest
+            .as_ref()
+            .map(|r| m.tool_for("--rest", &r.tool))
+            .transpose()?;
         if let (Some(r), Some(rt)) = (&self.rest, &rest_tool) {
             if rt.working_diameter() >= tool.working_diameter() {
                 bail!(
@@ -393,7 +423,7 @@ impl ToolpathJob {
         let main_r = self
             .rough
             .as_ref()
-            .map(|r| m.tool(&r.tool))
+            .map(|r| m.tool_for("--rough", &r.tool))
             .transpose()?
             .map_or(tool.radius(), |t| t.radius().min(tool.radius()));
         let rest_r = rest_tool.as_ref().map(|t| t.radius().max(0.05));
@@ -450,7 +480,7 @@ impl ToolpathJob {
         // rows' and layers' distance apart, which the pad's keep-out needs)
         let rough_cut = match &rough {
             Some(r) => {
-                let rt = m.tool(&r.tool)?;
+                let rt = m.tool_for("--rough", &r.tool)?;
                 let rc = material
                     .as_ref()
                     .and_then(|mt| mt.cutting_for(rt.working_diameter()));

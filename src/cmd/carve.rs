@@ -34,6 +34,8 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
         material,
     );
     relievo::output::check_writable(&args.output)?;
+    // the job's flags before the relief: a bad one is one error line
+    cam.check()?;
     // all or nothing, also when interrupted: no relief without its job
     relievo::output::interrupt::hold();
     let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
