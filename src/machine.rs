@@ -147,11 +147,24 @@ impl Machine {
         if matches!(finish, Tool::Flat { .. }) {
             return None;
         }
+        self.largest(|t| matches!(t, Tool::Flat { .. }))
+    }
+
+    /// The ball in the tool table to finish with ahead of a smaller
+    /// `tool` (then a rest tool): the largest up to 1/4 in. (name, spec)
+    pub fn finishing_ball(&self, tool: &crate::tool::Tool) -> Option<(String, String)> {
+        use crate::tool::Tool;
+        self.largest(|t| matches!(t, Tool::Ball { .. }) && t.radius() > tool.radius())
+    }
+
+    /// The largest tool up to 1/4 in of the table that `pick` takes.
+    fn largest(&self, pick: impl Fn(&crate::tool::Tool) -> bool) -> Option<(String, String)> {
         self.tools
             .iter()
-            .filter_map(|(k, e)| match Tool::parse(&e.tool) {
-                Ok(Tool::Flat { d }) if d <= 6.35 + 1e-9 => Some((d, k.clone(), e.tool.clone())),
-                _ => None,
+            .filter_map(|(k, e)| {
+                let t = crate::tool::Tool::parse(&e.tool).ok()?;
+                let d = t.working_diameter();
+                (pick(&t) && d <= 6.35 + 1e-9).then(|| (d, k.clone(), e.tool.clone()))
             })
             .max_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, k, s)| (k, s))

@@ -215,10 +215,10 @@ impl ToolpathJob {
         // tool changes and the day by
         let parts: Vec<Vec<(String, f64)>> = progs
             .iter()
-            .zip(op_starts.iter().zip(&texts))
+            .zip(&op_starts)
             .zip(groups)
-            .map(|((p, (starts, (_, text))), f)| {
-                let secs = sim::time_by_part(p, m, &at_headers(text, starts));
+            .map(|((p, starts), f)| {
+                let secs = sim::time_by_part(p, m, starts);
                 op_shares(f.1.iter().map(|o| (o.title, &o.tool)), &secs)
             })
             .collect();
@@ -232,7 +232,7 @@ impl ToolpathJob {
         }
         let estimate = |k: usize| {
             let split = if parts[k].len() > 1 {
-                format!(": {}", shares_text(&parts[k]))
+                format!(": {}", sim::shares_text(&parts[k]))
             } else {
                 String::new()
             };
@@ -495,14 +495,20 @@ impl ToolpathJob {
         ));
         let shift = plan.shift;
         // op 0 starts with the job (its header is the job's); every other
-        // after the lines before its own header
+        // at its own header, after the tool before it is put away (its
+        // retract and spindle stop count with that tool, as `simulate`
+        // counts them by the (tool: ..) comments)
         let mut starts = vec![0];
         for (k, op) in ops.iter().enumerate() {
+            let change = k > 0 && op.tool != ops[k - 1].tool;
+            if change {
+                e.put_away(&op.settings);
+            }
             if k > 0 {
                 starts.push(e.out.lines().count());
             }
-            if k > 0 && op.tool != ops[k - 1].tool {
-                e.tool_change(&header(op), &op.settings, &op.zero);
+            if change {
+                e.fit(&header(op), &op.settings, &op.zero);
             } else if k > 0 {
                 for h in header(op).iter().skip(1) {
                     crate::gcode::emit::comment(&mut e.out, h);
@@ -536,23 +542,17 @@ fn layers_advice(
     let layers: f64 = parts
         .iter()
         .flatten()
-        .filter(|p| p.0.starts_with("finishing-tool layers"))
+        .filter(|p| p.0.starts_with(super::LAYERS))
         .map(|p| p.1)
         .sum();
     if layers <= 0.5 * total {
         return None;
     }
     let bigger = m
-        .tools
-        .iter()
-        .filter_map(|(k, e)| match Tool::parse(&e.tool) {
-            Ok(t @ Tool::Ball { d }) if d <= 6.35 + 1e-9 && t.radius() > tool.radius() => {
-                Some((d, format!("{k} ({})", e.tool)))
-            }
-            _ => None,
-        })
-        .max_by(|a, b| a.0.total_cmp(&b.0))
-        .map_or("a larger ball".to_string(), |b| b.1);
+        .finishing_ball(tool)
+        .map_or("a larger ball".to_string(), |(k, spec)| {
+            format!("{k} ({spec})")
+        });
     Some(format!(
         "{} steps down in layers for {} of the {}: finishing with {bigger} and --rest {} \
          (only where the larger ball cannot reach) is usually much faster",
@@ -563,51 +563,21 @@ fn layers_advice(
     ))
 }
 
-/// Each op's start moved on to its header's first comment, so that the
-/// retract and spindle stop before a tool change count with the tool
-/// that made them, as `simulate` counts them by the (tool: ..) comments.
-fn at_headers(text: &str, starts: &[usize]) -> Vec<usize> {
-    let lines: Vec<&str> = text.lines().collect();
-    starts
-        .iter()
-        .enumerate()
-        .map(|(k, &s)| {
-            if k == 0 {
-                return 0;
-            }
-            (s..lines.len())
-                .find(|&i| lines[i].starts_with('('))
-                .unwrap_or(s)
-        })
-        .collect()
-}
-
-/// Seconds per op merged where neighbouring ops share title and tool:
+/// Seconds per op, ops of the same title and tool added together:
 /// ("roughing flat:3.175", seconds), in job order.
 fn op_shares<'a>(
     ops: impl Iterator<Item = (&'a str, &'a Tool)>,
     secs: &[f64],
 ) -> Vec<(String, f64)> {
-    merge_shares(
+    total_shares(
         ops.zip(secs)
             .map(|((title, tool), &s)| (format!("{title} {}", tool.spec()), s)),
     )
 }
 
-/// Neighbouring shares of the same name added together.
-fn merge_shares(shares: impl Iterator<Item = (String, f64)>) -> Vec<(String, f64)> {
-    let mut out: Vec<(String, f64)> = Vec::new();
-    for (name, s) in shares {
-        match out.last_mut() {
-            Some(last) if last.0 == name => last.1 += s,
-            _ => out.push((name, s)),
-        }
-    }
-    out
-}
-
 /// Shares of the same name added together wherever they stand, in the
-/// order first met: a tiled job's roughing over all its tiles.
+/// order first met: a file's ops of one kind, a tiled job's roughing over
+/// all its tiles.
 fn total_shares(shares: impl Iterator<Item = (String, f64)>) -> Vec<(String, f64)> {
     let mut out: Vec<(String, f64)> = Vec::new();
     for (name, s) in shares {
@@ -617,15 +587,6 @@ fn total_shares(shares: impl Iterator<Item = (String, f64)>) -> Vec<(String, f64
         }
     }
     out
-}
-
-/// "roughing flat:3.175 1h 02m 10s, finishing ball:3.175 58m 03s".
-pub fn shares_text(shares: &[(String, f64)]) -> String {
-    shares
-        .iter()
-        .map(|(name, s)| format!("{name} {}", sim::hms(*s)))
-        .collect::<Vec<_>>()
-        .join(", ")
 }
 
 /// How many lines `with_comments` adds for `notes`.

@@ -19,7 +19,6 @@ use std::path::{Path, PathBuf};
 mod boundary;
 pub mod cutout;
 mod deliver;
-pub use deliver::shares_text;
 mod finish;
 mod judge;
 pub mod layout;
@@ -228,6 +227,19 @@ pub struct CamSummary {
     pub timings: Timings,
 }
 
+impl CamSummary {
+    /// The estimate, with its split by op when the job changes tools:
+    /// "2h 10m 53s (roughing flat:3.175 1h 11m 27s, finishing ...)".
+    pub fn time_text(&self) -> String {
+        let total = sim::hms(self.time_s);
+        if self.time_by_op.len() > 1 {
+            format!("{total} ({})", sim::shares_text(&self.time_by_op))
+        } else {
+            total
+        }
+    }
+}
+
 /// One file of a job: where it goes, its ops, its frame, its header notes.
 type JobFile = (PathBuf, Vec<Op>, layout::Plan, Vec<String>);
 
@@ -274,6 +286,18 @@ impl Limits {
     }
 }
 
+/// What a job's flags name, checked before any work: the machine, the
+/// material, the tools and the finishing stepover (mm).
+struct Setup {
+    m: Machine,
+    material: Option<crate::materials::Material>,
+    tool: Tool,
+    step: f64,
+    /// The roughing tool asked for (an added one is chosen later).
+    rough_tool: Option<Tool>,
+    rest_tool: Option<Tool>,
+}
+
 /// The finest stepover taken, mm.
 const MIN_STEPOVER: f64 = 1e-3;
 
@@ -282,6 +306,10 @@ const MIN_STEPOVER: f64 = 1e-3;
 /// more moves than `simulate` reads (gcode::MAX_SEGMENTS). Past it the job
 /// is refused with the figure.
 const MAX_CL_POINTS: f64 = crate::gcode::MAX_SEGMENTS as f64;
+
+/// Title of the finishing tool's own layers (where more is left than it
+/// may cut at once).
+const LAYERS: &str = "finishing-tool layers";
 
 /// Size of the touch-off pad left by roughing, mm (a square).
 const PAD: f64 = 8.0;
@@ -304,9 +332,8 @@ impl ToolpathJob {
         self.setup().map(|_| ())
     }
 
-    /// `check`'s findings, for `run`: the machine, the material, the
-    /// finishing tool and its stepover (mm).
-    fn setup(&self) -> Result<(Machine, Option<crate::materials::Material>, Tool, f64)> {
+    /// `check`'s findings, for `run`.
+    fn setup(&self) -> Result<Setup> {
         if !(self.tolerance > 0.0 && self.tolerance <= 1.0) {
             bail!("--tolerance {}: must be in (0, 1] mm", self.tolerance);
         }
@@ -323,12 +350,16 @@ impl ToolpathJob {
             .map(crate::materials::find)
             .transpose()?;
         let tool = m.tool_for("--tool", &self.tool)?;
-        if let Some(r) = &self.rough {
-            m.tool_for("--rough", &r.tool)?;
-        }
-        if let Some(r) = &self.rest {
-            m.tool_for("--rest", &r.tool)?;
-        }
+        let rough_tool = self
+            .rough
+            .as_ref()
+            .map(|r| m.tool_for("--rough", &r.tool))
+            .transpose()?;
+        let rest_tool = self
+            .rest
+            .as_ref()
+            .map(|r| m.tool_for("--rest", &r.tool))
+            .transpose()?;
         let step = self.finish_step(&tool, material.as_ref())?;
         if !(self.angle.is_finite() && self.angle.abs() <= 360.0) {
             bail!(
@@ -336,7 +367,14 @@ impl ToolpathJob {
                 self.angle
             );
         }
-        Ok((m, material, tool, step))
+        Ok(Setup {
+            m,
+            material,
+            tool,
+            step,
+            rough_tool,
+            rest_tool,
+        })
     }
 
     /// The finishing stepover in mm: asked for, else the material's for
@@ -363,7 +401,14 @@ impl ToolpathJob {
         {
             check_writable(o)?;
         }
-        let (m, material, tool, step) = self.setup()?;
+        let Setup {
+            m,
+            material,
+            tool,
+            step,
+            rough_tool,
+            rest_tool,
+        } = self.setup()?;
         let limits = Limits {
             material: match &material {
                 Some(mt) => mt.clone(),
@@ -402,11 +447,6 @@ impl ToolpathJob {
         let floor = -relief.depth_mm;
         let (pw, ph) = (relief.width_mm, relief.height_mm);
         let panel = [0.0, 0.0, pw, ph];
-        let rest_tool = self
-            .rest
-            .as_ref()
-            .map(|r| m.tool_for("--rest", &r.tool))
-            .transpose()?;
         if let (Some(r), Some(rt)) = (&self.rest, &rest_tool) {
             if rt.working_diameter() >= tool.working_diameter() {
                 bail!(
@@ -420,12 +460,7 @@ impl ToolpathJob {
                 bail!("--rest-threshold {}: must be positive, mm", r.threshold);
             }
         }
-        let main_r = self
-            .rough
-            .as_ref()
-            .map(|r| m.tool_for("--rough", &r.tool))
-            .transpose()?
-            .map_or(tool.radius(), |t| t.radius().min(tool.radius()));
+        let main_r = rough_tool.map_or(tool.radius(), |t| t.radius().min(tool.radius()));
         let rest_r = rest_tool.as_ref().map(|t| t.radius().max(0.05));
         let most = layout::cell_limit(main_r.max(0.05), rest_r);
         let cell = layout::cell(relief.pitch_mm(), most);
@@ -513,14 +548,18 @@ impl ToolpathJob {
             .as_ref()
             .map_or(0.0, |c| c.3)
             .max(0.4 * tool.working_diameter());
-        let keep_out = pad.map(|p| p.2 / 2.0 + strip + tool.radius() + 0.5);
-        let off_pad = |x: f64, y: f64| match (pad, keep_out) {
-            (Some(p), Some(k)) => (x - p.0).abs() > k || (y - p.1).abs() > k,
-            _ => true,
+        // how far beyond the pad's edge the finish keeps off
+        let finish_round = strip + tool.radius() + 0.5;
+        // off the pad by `round` (mm beyond its edge), and with --boundary
+        // subject on the subject and its margin
+        let here = |x: f64, y: f64, round: f64| {
+            let off_pad = pad.is_none_or(|p| {
+                let k = p.2 / 2.0 + round;
+                (x - p.0).abs() > k || (y - p.1).abs() > k
+            });
+            off_pad && subject.as_ref().is_none_or(|s| s.is_near(x, y))
         };
-        // ... and, with --boundary subject, to the subject and its margin
-        let finish_here =
-            |x: f64, y: f64| off_pad(x, y) && subject.as_ref().is_none_or(|s| s.is_near(x, y));
+        let finish_here = |x: f64, y: f64| here(x, y, finish_round);
         let keep_off_pad: Option<&(dyn Fn(f64, f64) -> bool + Sync)> =
             (pad.is_some() || subject.is_some()).then_some(&finish_here);
         // the finishing tool's layers come closer, up to the pad and a
@@ -528,13 +567,7 @@ impl ToolpathJob {
         // down to what the finish may cut, where its rows beside the
         // keep-out reach in (a 1 mm ball's rows there met the roughing's
         // 0.3 mm and its terraces at full height: 0.521 mm, 0.5 allowed)
-        let layers_here = |x: f64, y: f64| {
-            let near_pad = pad.is_some_and(|p| {
-                let k = p.2 / 2.0 + tool.radius() + 0.5;
-                (x - p.0).abs() <= k && (y - p.1).abs() <= k
-            });
-            !near_pad && subject.as_ref().is_none_or(|s| s.is_near(x, y))
-        };
+        let layers_here = |x: f64, y: f64| here(x, y, tool.radius() + 0.5);
         let keep_layers: Option<&(dyn Fn(f64, f64) -> bool + Sync)> =
             (pad.is_some() || subject.is_some()).then_some(&layers_here);
         if let Some(s) = &subject {
@@ -635,7 +668,7 @@ impl ToolpathJob {
             raw_points += op.0.iter().map(|p| p.pts.len()).sum::<usize>();
             let passes = planned.ramp_and_cut(op.0, tool, false);
             ops.push(Op {
-                title: "finishing-tool layers",
+                title: LAYERS,
                 tool,
                 zero: String::new(),
                 settings: finish_settings.clone(),
@@ -715,7 +748,7 @@ impl ToolpathJob {
         }
         // the pad goes last: layers where it stands, then the surface
         if let Some(p) = pad {
-            let r = keep_out.unwrap_or(0.0) - p.2 / 2.0 + 0.5;
+            let r = finish_round + 0.5;
             let win = [
                 (p.0 - p.2 / 2.0 - r).max(0.0),
                 (p.1 - p.2 / 2.0 - r).max(0.0),

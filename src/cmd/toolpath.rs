@@ -255,13 +255,8 @@ pub fn report(s: &relievo::cam::CamSummary, quiet: bool, verbose: bool) {
             s.residual.0,
             s.residual.1
         );
-        let split = if s.time_by_op.len() > 1 {
-            format!(" ({})", relievo::cam::shares_text(&s.time_by_op))
-        } else {
-            String::new()
-        };
         eprintln!(
-            "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}{split}",
+            "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}",
             s.written
                 .iter()
                 .map(|p| p.display().to_string())
@@ -270,7 +265,7 @@ pub fn report(s: &relievo::cam::CamSummary, quiet: bool, verbose: bool) {
             s.lines,
             s.raw_points,
             s.stepover_mm,
-            relievo::sim::hms(s.time_s)
+            s.time_text()
         );
     }
     if verbose {

@@ -339,8 +339,20 @@ impl Emitter {
     /// `zero` where to set Z0 again. After the pause, safe Z again before
     /// the spindle starts and anything moves sideways.
     pub fn tool_change(&mut self, header: &[String], s: &Settings, zero: &str) {
+        self.put_away(s);
+        self.fit(header, s, zero);
+    }
+
+    /// The first half of a tool change, the last lines of the tool going
+    /// out: retract and stop the spindle.
+    pub fn put_away(&mut self, s: &Settings) {
         self.retract(s);
         self.line("M5".into());
+    }
+
+    /// The second half, the first lines of the tool coming in: its header,
+    /// the pause, safe Z and the spindle.
+    pub fn fit(&mut self, header: &[String], s: &Settings, zero: &str) {
         for h in header {
             comment(&mut self.out, h);
         }

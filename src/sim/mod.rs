@@ -147,12 +147,7 @@ impl Report {
             hms(self.time_s),
             self.lines
         ) + &if self.time_by_tool.len() > 1 {
-            let by: Vec<String> = self
-                .time_by_tool
-                .iter()
-                .map(|(tool, s)| format!("{tool} {}", hms(*s)))
-                .collect();
-            format!(": {}", by.join(", "))
+            format!(": {}", shares_text(&self.time_by_tool))
         } else {
             String::new()
         } + "\n"
@@ -168,6 +163,16 @@ pub fn hms(s: f64) -> String {
     } else {
         format!("{}m {:02}s", t / 60, t % 60)
     }
+}
+
+/// A time split: "roughing flat:3.175 1h 02m 10s, finishing ball:3.175
+/// 58m 03s".
+pub fn shares_text(shares: &[(String, f64)]) -> String {
+    shares
+        .iter()
+        .map(|(name, s)| format!("{name} {}", hms(*s)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// Rows per parallel band.

@@ -310,11 +310,7 @@ fn job_packet(j: &super::work::JobMade) -> Reply {
     Reply::binary(
         Packet::new(json!({
             "lines": s.lines,
-            "time": if s.time_by_op.len() > 1 {
-                format!("{} ({})", crate::sim::hms(s.time_s), crate::cam::shares_text(&s.time_by_op))
-            } else {
-                crate::sim::hms(s.time_s)
-            },
+            "time": s.time_text(),
             "time_s": s.time_s,
             "gouge_mm": rep.max_gouge_mm,
             "residual_mm": [rep.max_residual_mm, rep.mean_residual_mm],
