@@ -16,20 +16,12 @@ use crate::timing::Timings;
 use crate::{export, materials, preview};
 use std::path::PathBuf;
 
-/// Most pixels a relief may have, and why: 2^26 (the demo at 10628 px:
-/// 28 s, 4.2 GB); with a flat background 2^25, as its solver holds about
-/// 70 bytes a pixel beside the field (the demo at 7515 px with steps,
-/// bands, emphasis and every output: 41 s, 3.7 GB; at 10628 px the steps
-/// solve alone peaked at 7.4 GB).
-pub fn pixel_limit(p: &Params) -> (usize, &'static str) {
-    if p.flat_background {
-        (
-            file::MAX_PIXELS / 2,
-            "--flat-background takes (its solver's memory; the free background takes twice as many)",
-        )
-    } else {
-        (file::MAX_PIXELS, "allowed (memory)")
-    }
+/// Most pixels a relief may have, and why: 2^26, for memory. The 8192 px
+/// bunny (65 million pixels) with steps, bands, a preview and an STL
+/// peaks at 7.6 GB with `--flat-background` (its solver's vectors are
+/// f32) and 6.4 GB with the free background; 100 and 91 s.
+pub fn pixel_limit() -> (usize, &'static str) {
+    (file::MAX_PIXELS, "allowed (memory)")
 }
 
 /// Longest side accepted for `--resolution` (pixels).
@@ -222,7 +214,7 @@ impl ReliefJob {
     /// Load the model (or take `mesh`, already loaded from it) and look at
     /// it: the slow part of a relief, which no relief setting but the
     /// camera, the resolution, the up axis and `--smooth` changes.
-    pub fn see(&self, mesh: Option<&Mesh>, p: &Params, t: &mut Timings) -> Result<Sight> {
+    pub fn see(&self, mesh: Option<&Mesh>, t: &mut Timings) -> Result<Sight> {
         if self.model_is("png") {
             let path = self.model.as_ref().unwrap();
             let img = t.time("load", || load_png(path))?;
@@ -230,7 +222,7 @@ impl ReliefJob {
                 ImageModel::Depth(d) => (d.h.w, d.h.h),
                 ImageModel::Slopes(s) => (s.gx.w, s.gx.h),
             };
-            let (max, why) = pixel_limit(p);
+            let (max, why) = pixel_limit();
             if w * h > max {
                 bail!(
                     "{}: {w} x {h} = {:.1} million pixels, more than the {:.1} million {why}",
@@ -259,7 +251,7 @@ impl ReliefJob {
                 &self.camera(),
                 self.resolution,
                 2,
-                pixel_limit(p),
+                pixel_limit(),
                 self.smooth,
             )
         })?;
@@ -405,7 +397,7 @@ impl ReliefJob {
         let params = self.validate()?;
         let mut t = Timings::default();
         stage("loading and rendering");
-        let sight = self.see(None, &params, &mut t)?;
+        let sight = self.see(None, &mut t)?;
         stage("integrating");
         let (relief, field, warnings) = self.relief(&sight, &params, &mut t)?;
         drop(sight);

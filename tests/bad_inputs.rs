@@ -83,12 +83,6 @@ fn each_bad_input_fails_cleanly() {
         "--resolution 16384: the relief would be 16384 x 9732 = 159.4 million pixels, \
          more than the 67.1 million allowed (memory); use --resolution 10628 or less",
     );
-    fails(
-        &d,
-        &["--resolution", "10000", "--flat-background"],
-        "--resolution 10000: the relief would be 10000 x 5940 = 59.4 million pixels, \
-         more than the 33.6 million --flat-background takes",
-    );
     fails(&d, &[&spot, "--bands", "2,x"], "--bands");
     fails(&d, &[&spot, "--material", "unobtainium"], "unobtainium");
     fails(&d, &[&spot, "--depth", "-1"], "--depth");

@@ -162,6 +162,39 @@ fn steep_walls_are_not_entered_by_plunging() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// A travel between two pieces of a pass clears every cell any part of
+/// which lies within the tool's reach, not only those whose centres do:
+/// Suzanne's finish alone at 400 px with the field held flat hopped from
+/// a row split at the panel's edge 1 mm over the cut, 0.93 mm under an
+/// uncut row beside it (the cell's centre had been cut).
+#[test]
+fn travels_clear_uncut_stock_at_the_edge_of_a_cut() {
+    let d = scratch("safe-hop");
+    let suzanne = fixture("suzanne.stl");
+    let (_, rep) = carve_judged(
+        &d,
+        &[
+            &suzanne,
+            "--up",
+            "y",
+            "--resolution",
+            "400",
+            "--width",
+            "60",
+            "--depth",
+            "3",
+            "--tool",
+            "ball:2",
+            "--flat-background",
+            "--allow-deep-cuts",
+        ],
+    );
+    let rapids = &rep["rapids_in_stock"];
+    assert!(rapids.as_array().unwrap().is_empty(), "{rapids}");
+    no_plunge_nor_gouge(&rep);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// A coarse relief (the 48 px demo, 60 mm wide, 3 mm deep: 1.25 mm
 /// samples) is judged as `simulate` sees it with its default fine cells:
 /// no tool cuts deeper than the material allows, and the job's own

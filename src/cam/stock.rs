@@ -184,14 +184,21 @@ impl Planned {
     /// The highest material within `r` of the straight way from `a` to
     /// `b` (XY), at least both ends' Z: sampled at most half a radius
     /// apart, each sample over r sqrt(1 + 1/16), which covers every point
-    /// within r of the way.
+    /// within r of the way, and half a cell's diagonal more, so that a
+    /// cell any part of which lies within reach counts (a cell's height
+    /// is its centre's: at the edge of a cut a cell whose centre the tool
+    /// took may be stock top elsewhere; the finish of Suzanne at 400 px
+    /// with the field held flat hopped 1 mm over the cut beside an uncut
+    /// row that stood 0.93 mm higher, within the tool's reach).
     fn over_the_way(&self, a: DVec3, b: DVec3, r: f64) -> f64 {
         let len = (b - a).truncate().length();
         let n = (len / (0.5 * r)).ceil() as usize + 1;
+        let reach =
+            r * (1.0f64 + 1.0 / 16.0).sqrt() + self.stock.pitch * std::f64::consts::FRAC_1_SQRT_2;
         (0..=n)
             .map(|k| {
                 let p = a + (b - a) * (k as f64 / n as f64);
-                self.highest(p.x, p.y, r * (1.0f64 + 1.0 / 16.0).sqrt())
+                self.highest(p.x, p.y, reach)
             })
             .fold(a.z.max(b.z), f64::max)
     }

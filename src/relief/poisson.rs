@@ -6,9 +6,9 @@
 //! * Flat background (Dirichlet h = 0 on background pixels): conjugate
 //!   gradients preconditioned by a geometric multigrid V-cycle on the
 //!   masked grid (damped Jacobi, bilinear transfers, a coarse cell an
-//!   unknown when 3 of its 4 children are; f32, straight-line row kernels):
-//!   13 iterations to a 1e-6 residual at 4096 px, 1.8x the free solve's
-//!   whole run.
+//!   unknown when 3 of its 4 children are; f32 throughout, straight-line
+//!   row kernels): about 10 iterations to a 1e-5 residual, 60-100 ms at
+//!   1024 px against the DCT's 25-30 ms.
 //!
 //! Gradients are forward differences per pixel: gx(i,j) = h(i+1,j) - h(i,j);
 //! the last column of gx and the last row of gy are ignored (no edge there).
@@ -136,10 +136,11 @@ impl Real for f64 {
 
 /// Damping of the Jacobi smoother.
 const OMEGA: f64 = 0.8;
-/// Relative residual at which CG stops. The 16-bit relief then differs
-/// from a 1e-12 solve by at most one unit; at 1e-4 it still does, at 1e-3
-/// no longer (2048 px: spot, and the demo with steps and bands).
-const TOLERANCE: f64 = 1e-6;
+/// Relative residual at which CG stops: the 16-bit relief differs from a
+/// 1e-12 solve by at most one unit (1024 px bunny and Spot: 0.3% and 0.7%
+/// of samples by one; at 1e-4 5.7% and 4.6%, at 1e-3 up to 14 units),
+/// after 10 iterations where 1e-6 takes 12.
+const TOLERANCE: f64 = 1e-5;
 
 impl Level {
     fn coarsen(&self) -> Level {
@@ -279,20 +280,21 @@ impl Level {
     /// CG's step of its search direction and its product with A in one
     /// pass: `pn` = z + beta p, `ap` = A pn; returns pn . A pn. A task
     /// takes a run of rows and makes each row of pn once, as it is needed.
-    fn step_apply(&self, z: &[f32], p: &[f64], beta: f64, pn: &mut [f64], ap: &mut [f64]) -> f64 {
+    fn step_apply(&self, z: &[f32], p: &[f32], beta: f64, pn: &mut [f32], ap: &mut [f32]) -> f64 {
         let w = self.w;
         let run = self.min_rows().max(8);
-        let make = |y: usize, buf: &mut Vec<f64>| {
+        let beta = beta as f32;
+        let make = |y: usize, buf: &mut Vec<f32>| {
             buf.clear();
             let (zr, pr) = (&z[y * w..(y + 1) * w], &p[y * w..(y + 1) * w]);
-            buf.extend(zr.iter().zip(pr).map(|(&a, b)| a as f64 + beta * b));
+            buf.extend(zr.iter().zip(pr).map(|(&a, &b)| a + beta * b));
         };
         pn.par_chunks_mut(w * run)
             .zip(ap.par_chunks_mut(w * run))
             .enumerate()
             .map_init(
                 || [Vec::new(), Vec::new(), Vec::new(), Vec::new()],
-                |[prev, cur, next, ax]: &mut [Vec<f64>; 4], (chunk, (pnc, apc))| {
+                |[prev, cur, next, ax]: &mut [Vec<f32>; 4], (chunk, (pnc, apc))| {
                     let y0 = chunk * run;
                     if y0 > 0 {
                         make(y0 - 1, prev);
@@ -499,10 +501,6 @@ fn vcycle(levels: &[Level], work: &mut [Work], k: usize) -> f64 {
     l.sweep(wk)
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.par_iter().zip(b.par_iter()).map(|(x, y)| x * y).sum()
-}
-
 /// Dirichlet solve: lap h = div on pixels where `unknown` is true, h = 0
 /// elsewhere. Background pixels come out exactly 0. Returns the solution
 /// and the number of CG iterations.
@@ -519,27 +517,22 @@ pub fn solve_masked(div: &Grid<f64>, unknown: &Grid<bool>) -> (Grid<f64>, usize)
     }
     let mut work: Vec<Work> = levels.iter().map(Level::work).collect();
     let l0 = &levels[0];
-    let mut r: Vec<f64> = div
-        .data
-        .par_iter()
-        .zip(l0.unknown.par_iter())
-        .map(|(d, &u)| if u { -d } else { 0.0 })
-        .collect();
-    let bnorm = dot(&r, &r).sqrt();
-    let mut x = vec![0.0; w * h];
-    if bnorm == 0.0 {
-        return (Grid::from_vec(w, h, x), 0);
-    }
-    // the V-cycle reads an f32 copy of CG's residual
+    // CG's residual is the V-cycle's right-hand side (f32: the relief's
+    // 16 bits need a 1e-4 residual, far above f32's rounding)
     work[0]
         .r
         .par_iter_mut()
-        .zip(r.par_iter())
-        .for_each(|(a, b)| *a = *b as f32);
+        .zip(div.data.par_iter().zip(l0.unknown.par_iter()))
+        .for_each(|(r, (d, &u))| *r = if u { -*d as f32 } else { 0.0 });
+    let bnorm = dot4(&work[0].r, &work[0].r).sqrt();
+    let mut x = vec![0.0f32; w * h];
+    if bnorm == 0.0 {
+        return (Grid::from_vec(w, h, vec![0.0; w * h]), 0);
+    }
     let mut z = vec![0.0f32; w * h];
     // the search direction, and the buffer its next value is made in
-    let (mut p, mut p_old) = (vec![0.0; w * h], vec![0.0; w * h]);
-    let mut ap = vec![0.0; w * h];
+    let (mut p, mut p_old) = (vec![0.0f32; w * h], vec![0.0f32; w * h]);
+    let mut ap = vec![0.0f32; w * h];
     let mut rz = 0.0;
     let mut it = 0;
     while it < 1000 {
@@ -552,22 +545,24 @@ pub fn solve_masked(div: &Grid<f64>, unknown: &Grid<bool>) -> (Grid<f64>, usize)
         let pap = l0.step_apply(&z, &p_old, beta, &mut p, &mut ap);
         std::mem::swap(&mut p, &mut p_old);
         let p = &p_old;
-        let alpha = rz / pap;
+        let alpha = (rz / pap) as f32;
         let rr: f64 = x
-            .par_iter_mut()
-            .zip(r.par_iter_mut().zip(work[0].r.par_iter_mut()))
-            .zip(p.par_iter().zip(ap.par_iter()))
-            .map(|((xi, (ri, r32)), (pi, ai))| {
-                *xi += alpha * pi;
-                *ri -= alpha * ai;
-                *r32 = *ri as f32;
-                *ri * *ri
+            .par_chunks_mut(4096)
+            .zip(work[0].r.par_chunks_mut(4096))
+            .zip(p.par_chunks(4096).zip(ap.par_chunks(4096)))
+            .map(|((xc, rc), (pc, ac))| {
+                for (((xi, ri), pi), ai) in xc.iter_mut().zip(rc.iter_mut()).zip(pc).zip(ac) {
+                    *xi += alpha * pi;
+                    *ri -= alpha * ai;
+                }
+                dot4(rc, rc)
             })
             .sum();
         if rr.sqrt() <= TOLERANCE * bnorm {
             break;
         }
     }
+    let x = x.into_iter().map(f64::from).collect();
     (Grid::from_vec(w, h, x), it)
 }
 
@@ -671,8 +666,12 @@ mod tests {
             .data
             .iter()
             .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+        // within half a unit of the 16-bit relief
         let e = max_err(&sol, &f, false);
-        assert!(e < 1e-6 * (hi - lo), "error {e} after {iters} iterations");
+        assert!(
+            e < 0.5 * (hi - lo) / 65535.0,
+            "error {e} after {iters} iterations"
+        );
         assert!(iters < 60, "{iters} iterations");
         for (s, u) in sol.data.iter().zip(&unknown.data) {
             if !u {

@@ -285,7 +285,7 @@ impl Studio {
         let (sight, shaped) = match cached {
             Some(c) => c,
             None => {
-                let sight = Arc::new(job.see(model.mesh.as_deref(), &params, &mut t)?);
+                let sight = Arc::new(job.see(model.mesh.as_deref(), &mut t)?);
                 (sight, None)
             }
         };
