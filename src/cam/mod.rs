@@ -229,7 +229,7 @@ pub struct CamSummary {
 
 impl CamSummary {
     /// The estimate, with its split by op when the job changes tools:
-    /// "2h 10m 53s (roughing flat:3.175 1h 11m 27s, finishing ...)".
+    /// "2h 10m 59s (roughing flat:3.175 1h 11m 32s, finishing ...)".
     pub fn time_text(&self) -> String {
         let total = sim::hms(self.time_s);
         if self.time_by_op.len() > 1 {
