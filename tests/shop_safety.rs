@@ -195,6 +195,19 @@ fn travels_clear_uncut_stock_at_the_edge_of_a_cut() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// A sharp tool's tip between the planning cells' centres meets the
+/// material of the cell it is in: a V-bit finishing the roughed demo
+/// ramps in where it starts in the stock left on the relief (at 160 px
+/// it went straight down into it 56 times, its tip between centres that
+/// stood 0.25 mm above it).
+#[test]
+fn a_v_bit_ramps_into_the_stock_roughing_left() {
+    let d = scratch("safe-vbit");
+    let (_, rep) = carve_judged(&d, &["--resolution", "160", "--tool", "vbit:60:6"]);
+    no_plunge_nor_gouge(&rep);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// A coarse relief (the 48 px demo, 60 mm wide, 3 mm deep: 1.25 mm
 /// samples) is judged as `simulate` sees it with its default fine cells:
 /// no tool cuts deeper than the material allows, and the job's own

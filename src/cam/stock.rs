@@ -111,7 +111,13 @@ impl Planned {
                 let split = self.steep_drop(&p.pts[from..], r).map(|i| from + i);
                 let to = split.unwrap_or(p.pts.len());
                 let mut piece = p.pts[from..to].to_vec();
-                let in_material = |q: DVec3| self.would_cut(q.x, q.y, q.z, &tool) > 0.005;
+                // a cell's height is its centre's: a sharp tip (a V-bit's)
+                // between centres meets the material of the cell it is in
+                let tip_reach = self.stock.pitch * std::f64::consts::FRAC_1_SQRT_2;
+                let in_material = |q: DVec3| {
+                    self.would_cut(q.x, q.y, q.z, &tool) > 0.005
+                        || self.highest(q.x, q.y, tip_reach) - q.z > 0.005
+                };
                 // a surface piece between two steep drops too short to ramp
                 // along would be entered straight down from above: the drop
                 // that leads to it is the gentler way in, so it stays
