@@ -196,15 +196,21 @@ fn travels_clear_uncut_stock_at_the_edge_of_a_cut() {
 }
 
 /// A sharp tool's tip between the planning cells' centres meets the
-/// material of the cell it is in: a V-bit finishing the roughed demo
-/// ramps in where it starts in the stock left on the relief (at 160 px
-/// it went straight down into it 56 times, its tip between centres that
-/// stood 0.25 mm above it).
+/// material of the cell it is in: a V-bit finishing the roughed demo and
+/// Spot ramps in where it starts in the stock left on the relief (at 160
+/// px it went straight down into it 56 and 70 times, its tip between
+/// centres that stood 0.25 mm above it; Spot's last one on the panel's
+/// corner, exactly half a cell's diagonal from the nearest centre).
 #[test]
 fn a_v_bit_ramps_into_the_stock_roughing_left() {
     let d = scratch("safe-vbit");
-    let (_, rep) = carve_judged(&d, &["--resolution", "160", "--tool", "vbit:60:6"]);
-    no_plunge_nor_gouge(&rep);
+    let spot = fixture("spot.obj");
+    for model in [None, Some(spot.as_str())] {
+        let mut a = vec!["--resolution", "160", "--tool", "vbit:60:6"];
+        a.extend(model);
+        let (_, rep) = carve_judged(&d, &a);
+        no_plunge_nor_gouge(&rep);
+    }
     std::fs::remove_dir_all(d).unwrap();
 }
 

@@ -113,7 +113,9 @@ impl Planned {
                 let mut piece = p.pts[from..to].to_vec();
                 // a cell's height is its centre's: a sharp tip (a V-bit's)
                 // between centres meets the material of the cell it is in
-                let tip_reach = self.stock.pitch * std::f64::consts::FRAC_1_SQRT_2;
+                // (a hair more than half its diagonal, so that a tip on a
+                // cell's corner, the panel's, still finds it)
+                let tip_reach = self.stock.pitch * (std::f64::consts::FRAC_1_SQRT_2 + 1e-6);
                 let in_material = |q: DVec3| {
                     self.would_cut(q.x, q.y, q.z, &tool) > 0.005
                         || self.highest(q.x, q.y, tip_reach) - q.z > 0.005
