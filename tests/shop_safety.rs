@@ -214,6 +214,42 @@ fn a_v_bit_ramps_into_the_stock_roughing_left() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// A flat end mill's moves are probed where its rim leaves a sample or an
+/// edge of the relief's surface (where its CL surface bends down), not
+/// only where its axis crosses them: the 160 px demo's flat:2 finish cut
+/// 0.0134 mm into the surface between probes (simulated on cells a fifth
+/// of a sample: `simulate`'s own for a flat are the samples, under which
+/// the rim's cut is not seen); now under 0.002 mm.
+#[test]
+fn a_flat_end_mill_s_rim_keeps_off_the_surface_between_samples() {
+    let d = scratch("safe-flat-rim");
+    let job = d.join("job.nc");
+    let o = job.to_str().unwrap();
+    ok(&run(&[
+        "carve",
+        "--resolution",
+        "160",
+        "--tool",
+        "flat:2",
+        "-o",
+        o,
+        "-q",
+    ]));
+    let rep = simulate_report(
+        &job,
+        &d.join("job-relief.png"),
+        &d.join("cut.png"),
+        &["--oversample", "5"],
+    );
+    let gouge = rep["max_gouge_mm"].as_f64().unwrap();
+    assert!(
+        gouge < 0.002,
+        "gouge {gouge} mm at {}",
+        rep["max_gouge_at_mm"]
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// A coarse relief (the 48 px demo, 60 mm wide, 3 mm deep: 1.25 mm
 /// samples) is judged as `simulate` sees it with its default fine cells:
 /// no tool cuts deeper than the material allows, and the job's own

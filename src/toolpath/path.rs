@@ -267,11 +267,13 @@ fn dropped_move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, drops: 
 /// centre surface and on level ground bends as the ball (at 2048 px the
 /// spacing is 0.036 mm, not half a sample: the 2048 px bunny raster 2.92
 /// -> 2.43 s, same gouge); a tapered ball's flank makes peaks over
-/// vertices, so its probes stay at least two a sample.
+/// vertices, so its probes stay at least two a sample; a flat's rim
+/// riding an edge bends its CL surface sharply, so four a sample.
 fn probe_spacing(hf: &HeightField, tool: &Tool) -> f64 {
     match *tool {
         Tool::Ball { d } => (2.0 * CHECK * d).sqrt(),
         Tool::TaperBall { tip_r, .. } => (4.0 * CHECK * tip_r).sqrt().min(0.5 * hf.pitch),
+        Tool::Flat { .. } => 0.25 * hf.pitch,
         _ => 0.5 * hf.pitch,
     }
 }
@@ -327,6 +329,59 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
         cross(a.x, d.x, 0.5 * p);
         cross(top - a.y, -d.y, 0.5 * p);
         cross(a.x + top - a.y, d.x - d.y, 0.0);
+    }
+    // a flat's CL surface is the highest of the relief under its disc; it
+    // bends down (where a chord would cut in) where a sample or an edge
+    // leaves the disc: where the rim is a radius from an edge's line or
+    // from a sample as high as the move (the 160 px demo's flat:2 finish
+    // cut 0.0134 mm into the surface between probes at the axis'
+    // crossings alone, now 0.0013-0.0016; the 512 px flat:3.175 carve
+    // takes 2.4 s instead of 1.3)
+    if let Tool::Flat { d: dia } = *tool {
+        let r = dia / 2.0;
+        for s in [-1.0, 1.0] {
+            cross(a.x + s * r, d.x, 0.5 * p);
+            cross(top - a.y + s * r, -d.y, 0.5 * p);
+            cross(
+                a.x + top - a.y + s * r * std::f64::consts::SQRT_2,
+                d.x - d.y,
+                0.0,
+            );
+        }
+        let z = hf.samples();
+        let (lo, hi) = (a.min(b), a.max(b));
+        let (i0, i1) = (
+            ((lo.x - r) / p - 0.5).floor().max(0.0) as usize,
+            (((hi.x + r) / p - 0.5).ceil().max(0.0) as usize).min(z.w.saturating_sub(1)),
+        );
+        let (j0, j1) = (
+            ((top - hi.y - r) / p - 0.5).floor().max(0.0) as usize,
+            (((top - lo.y + r) / p - 0.5).ceil().max(0.0) as usize).min(z.h.saturating_sub(1)),
+        );
+        let dd = d.truncate().length_squared();
+        if dd > 0.0 && (i1 - i0 + 1) * (j1 - j0 + 1) < 1 << 20 {
+            // only a sample that may hold the tool as high as the move
+            let low = a.z.min(b.z) + floor;
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    if *z.get(i, j) < low {
+                        continue;
+                    }
+                    // |a + t d - v|^2 = r^2
+                    let (vx, vy) = hf.centre(i, j);
+                    let (ex, ey) = (a.x - vx, a.y - vy);
+                    let bq = ex * d.x + ey * d.y;
+                    let disc = bq * bq - dd * (ex * ex + ey * ey - r * r);
+                    if disc > 0.0 {
+                        for t in [(-bq - disc.sqrt()) / dd, (-bq + disc.sqrt()) / dd] {
+                            if t > 0.0 && t < 1.0 {
+                                ts.push(t);
+                            }
+                        }
+                    }
+                }
+            }
+        }
     }
     ts.sort_unstable_by(f64::total_cmp);
     let spacing = probe_spacing(hf, tool);
