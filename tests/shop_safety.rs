@@ -7,6 +7,15 @@ use common::*;
 
 /// `carve` with `args` into `dir`; (stdout, simulated report).
 fn carve_judged(dir: &std::path::Path, args: &[&str]) -> (String, serde_json::Value) {
+    carve_simulated(dir, args, &[])
+}
+
+/// `carve_judged` with `simulate` given `sim` besides.
+fn carve_simulated(
+    dir: &std::path::Path,
+    args: &[&str],
+    sim: &[&str],
+) -> (String, serde_json::Value) {
     let job = dir.join("job.nc");
     let mut a = vec!["carve", "-o", job.to_str().unwrap()];
     a.extend_from_slice(args);
@@ -16,7 +25,7 @@ fn carve_judged(dir: &std::path::Path, args: &[&str]) -> (String, serde_json::Va
     // them), three per relief pixel here, not the cells the job was
     // planned on: the rim of a row's cut falling between those used to
     // hide material under a roughing pass going steeply down a wall
-    let rep = simulate_report(&job, &dir.join("job-relief.png"), &dir.join("cut.png"), &[]);
+    let rep = simulate_report(&job, &dir.join("job-relief.png"), &dir.join("cut.png"), sim);
     (String::from_utf8_lossy(&out.stdout).to_string(), rep)
 }
 
@@ -223,22 +232,9 @@ fn a_v_bit_ramps_into_the_stock_roughing_left() {
 #[test]
 fn a_flat_end_mill_s_rim_keeps_off_the_surface_between_samples() {
     let d = scratch("safe-flat-rim");
-    let job = d.join("job.nc");
-    let o = job.to_str().unwrap();
-    ok(&run(&[
-        "carve",
-        "--resolution",
-        "160",
-        "--tool",
-        "flat:2",
-        "-o",
-        o,
-        "-q",
-    ]));
-    let rep = simulate_report(
-        &job,
-        &d.join("job-relief.png"),
-        &d.join("cut.png"),
+    let (_, rep) = carve_simulated(
+        &d,
+        &["--resolution", "160", "--tool", "flat:2"],
         &["--oversample", "5"],
     );
     let gouge = rep["max_gouge_mm"].as_f64().unwrap();

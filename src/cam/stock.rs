@@ -65,6 +65,16 @@ impl Planned {
         self.fold_footprint((x, y, r), f64::NEG_INFINITY, |m, z, _| m.max(z))
     }
 
+    /// The highest material of the cells any part of which lies within
+    /// `r` of (x, y): a cell's height is its centre's, and at the edge of
+    /// a cut a cell whose centre the tool took may be stock top elsewhere
+    /// (a hair more than half its diagonal, so that a point on a cell's
+    /// corner, the panel's, still finds it).
+    fn highest_touching(&self, x: f64, y: f64, r: f64) -> f64 {
+        let half_diagonal = self.stock.pitch * (std::f64::consts::FRAC_1_SQRT_2 + 1e-6);
+        self.highest(x, y, r + half_diagonal)
+    }
+
     /// The thickest material the tool at tip (x, y, z) would cut: over the
     /// cells under it, how far the stock stands above its surface.
     pub fn would_cut(&self, x: f64, y: f64, z: f64, tool: &Tool) -> f64 {
@@ -111,14 +121,11 @@ impl Planned {
                 let split = self.steep_drop(&p.pts[from..], r).map(|i| from + i);
                 let to = split.unwrap_or(p.pts.len());
                 let mut piece = p.pts[from..to].to_vec();
-                // a cell's height is its centre's: a sharp tip (a V-bit's)
-                // between centres meets the material of the cell it is in
-                // (a hair more than half its diagonal, so that a tip on a
-                // cell's corner, the panel's, still finds it)
-                let tip_reach = self.stock.pitch * (std::f64::consts::FRAC_1_SQRT_2 + 1e-6);
+                // a sharp tip (a V-bit's) between the cells' centres meets
+                // the material of the cell it is in
                 let in_material = |q: DVec3| {
                     self.would_cut(q.x, q.y, q.z, &tool) > 0.005
-                        || self.highest(q.x, q.y, tip_reach) - q.z > 0.005
+                        || self.highest_touching(q.x, q.y, 0.0) - q.z > 0.005
                 };
                 // a surface piece between two steep drops too short to ramp
                 // along would be entered straight down from above: the drop
@@ -192,21 +199,18 @@ impl Planned {
     /// The highest material within `r` of the straight way from `a` to
     /// `b` (XY), at least both ends' Z: sampled at most half a radius
     /// apart, each sample over r sqrt(1 + 1/16), which covers every point
-    /// within r of the way, and half a cell's diagonal more, so that a
-    /// cell any part of which lies within reach counts (a cell's height
-    /// is its centre's: at the edge of a cut a cell whose centre the tool
-    /// took may be stock top elsewhere; the finish of Suzanne at 400 px
-    /// with the field held flat hopped 1 mm over the cut beside an uncut
-    /// row that stood 0.93 mm higher, within the tool's reach).
+    /// within r of the way, in every cell any part of which lies there
+    /// (the finish of Suzanne at 400 px with the field held flat hopped
+    /// 1 mm over the cut beside an uncut row that stood 0.93 mm higher,
+    /// within the tool's reach, whose cell's centre had been cut).
     fn over_the_way(&self, a: DVec3, b: DVec3, r: f64) -> f64 {
         let len = (b - a).truncate().length();
         let n = (len / (0.5 * r)).ceil() as usize + 1;
-        let reach =
-            r * (1.0f64 + 1.0 / 16.0).sqrt() + self.stock.pitch * std::f64::consts::FRAC_1_SQRT_2;
+        let reach = r * (1.0f64 + 1.0 / 16.0).sqrt();
         (0..=n)
             .map(|k| {
                 let p = a + (b - a) * (k as f64 / n as f64);
-                self.highest(p.x, p.y, reach)
+                self.highest_touching(p.x, p.y, reach)
             })
             .fold(a.z.max(b.z), f64::max)
     }

@@ -348,18 +348,21 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
                 0.0,
             );
         }
+        use crate::sweep::cells_between;
         let z = hf.samples();
         let (lo, hi) = (a.min(b), a.max(b));
-        let (i0, i1) = (
-            ((lo.x - r) / p - 0.5).floor().max(0.0) as usize,
-            (((hi.x + r) / p - 0.5).ceil().max(0.0) as usize).min(z.w.saturating_sub(1)),
-        );
-        let (j0, j1) = (
-            ((top - hi.y - r) / p - 0.5).floor().max(0.0) as usize,
-            (((top - lo.y + r) / p - 0.5).ceil().max(0.0) as usize).min(z.h.saturating_sub(1)),
-        );
         let dd = d.truncate().length_squared();
-        if dd > 0.0 && (i1 - i0 + 1) * (j1 - j0 + 1) < 1 << 20 {
+        let span = cells_between(lo.x - r, hi.x + r, p, z.w).zip(cells_between(
+            top - hi.y - r,
+            top - lo.y + r,
+            p,
+            z.h,
+        ));
+        // (a long slanted move's box would hold most of the relief)
+        let small = |((i0, i1), (j0, j1)): &((usize, usize), (usize, usize))| {
+            (i1 - i0 + 1) * (j1 - j0 + 1) < 1 << 20
+        };
+        if let (Some(((i0, i1), (j0, j1))), true) = (span.filter(small), dd > 0.0) {
             // only a sample that may hold the tool as high as the move
             let low = a.z.min(b.z) + floor;
             for j in j0..=j1 {
