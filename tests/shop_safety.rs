@@ -1003,8 +1003,10 @@ fn the_armadillo_svg_opens_and_its_rapids_are_short() {
 
 /// A refused job's advice fits the operation that cuts too deep, told by
 /// the op the line belongs to, not by its tool: the Cornell box's back
-/// view with a flat field and 0.5 mm steps has strips ~2 mm wide between
-/// the box and the panel's edges that a 3.175 mm flat cannot rough. With
+/// view with a flat field and 2 mm steps has strips ~2.5 mm wide between
+/// the box and the panel's edges, 2 mm deep, that a 3.175 mm flat cannot
+/// rough (with 0.5 mm steps they were deep enough only while a subject
+/// dipping below the field was lifted whole). With
 /// the same flat roughing and finishing, the finish is the one over (it
 /// used to be told to lower --step-down); with a roughing layer of 3 mm,
 /// roughing is.
@@ -1020,7 +1022,7 @@ fn refusals_advise_for_the_operation_that_cuts_too_deep() {
         "back",
         "--flat-background",
         "--steps",
-        "0.5",
+        "2",
         "--resolution",
         "256",
         "-o",

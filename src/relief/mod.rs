@@ -177,13 +177,18 @@ fn spread_steps(g: &Grid<f32>) -> Grid<f32> {
     out
 }
 
-/// The field's slopes `gx`, `gy` integrated: free (Neumann) or with the
-/// background held at 0.
-fn integrate(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: bool) -> Grid<f64> {
+/// The divergence of slopes `gx`, `gy` in the field's units.
+fn divergence(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>) -> Grid<f64> {
     let n = field.gx.w.max(field.gx.h);
-    let div = poisson::divergence(gx, gy, 1.0 / n as f64);
+    poisson::divergence(gx, gy, 1.0 / n as f64)
+}
+
+/// The field's slopes `gx`, `gy` integrated: free (Neumann) or with the
+/// background held at 0 and the subject kept on or above it.
+fn integrate(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: bool) -> Grid<f64> {
+    let div = divergence(field, gx, gy);
     if flat_background {
-        poisson::solve_masked(&div, &field.mask).0
+        poisson::solve_obstacle(&div, &field.mask).0
     } else {
         poisson::solve_neumann(&div)
     }
@@ -197,7 +202,7 @@ fn integrate(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: boo
 /// step's spread.
 pub fn unit_steps(field: &Field, flat_background: bool) -> Grid<f64> {
     if flat_background {
-        integrate(field, &field.sx, &field.sy, true)
+        poisson::solve_masked(&divergence(field, &field.sx, &field.sy), &field.mask).0
     } else {
         integrate(
             field,
@@ -402,7 +407,9 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
             if p.flat_background && field.mask.data.iter().all(|&m| m) {
                 bail!("--flat-background: the input has no background pixels to hold at 0");
             }
-            // with a flat background, no part of the subject below it
+            // with a flat background the solve keeps the subject on or
+            // above the field; steps added to it can still sink a part
+            // (an inner outline stepping down), which is then lifted
             let lift = |h: &mut Grid<f64>| {
                 if p.flat_background {
                     lift_above_field(h, &field.mask);
@@ -420,8 +427,7 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                         bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");
                     }
                     t.time("shoulders", || shoulders::flatten(&mut gx, &mut gy, field));
-                    let mut main = t.time("poisson", || solve(&gx, &gy));
-                    lift(&mut main);
+                    let main = t.time("poisson", || solve(&gx, &gy));
                     // choose c so a unit step (1 / n_fine of h) becomes s mm
                     // after the final scaling to depth
                     let mut c = s * nf * range(&main, &steps, 0.0) / subject;
@@ -447,8 +453,7 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                     to_mm(&total, subject)
                 }
                 _ => {
-                    let mut h = t.time("poisson", || solve(&gx, &gy));
-                    lift(&mut h);
+                    let h = t.time("poisson", || solve(&gx, &gy));
                     to_mm(&h, subject)
                 }
             }

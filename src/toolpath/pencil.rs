@@ -64,20 +64,88 @@ pub fn lines(
                 let (a, b) = (z(i - di, j - dj), z(i + di, j + dj));
                 let len2 = ((di * di + dj * dj) as f64) * g * g;
                 // (NaN compares false: off the region is no valley)
-                a >= c && b >= c && (a + b - 2.0 * c) / len2 >= kappa
+                if !(a >= c && b >= c) {
+                    return false;
+                }
+                // a crease just short of the next node bends the CL
+                // curve little over one step, much over two (the next
+                // node already risen: a flat floor's nodes further out
+                // are not its valley)
+                let (a2, b2) = (z(i - 2 * di, j - 2 * dj), z(i + 2 * di, j + 2 * dj));
+                (a + b - 2.0 * c) / len2 >= kappa
+                    || ((a > c || b > c)
+                        && a2 >= c
+                        && b2 >= c
+                        && (a2 + b2 - 2.0 * c) / (4.0 * len2) >= kappa)
             })
         })
         .collect();
+    // a node lies up to a grid step from the crease. Across its sharpest
+    // bend the CL curve lies furthest below the chord between the nodes
+    // two steps either side at the crease (a valley's bottom, a wall's
+    // foot), where it turns; golden-section search for it between the
+    // neighbouring nodes
+    let refined = |i: usize, j: usize| -> DVec3 {
+        let (x, y) = at(i, j);
+        let node = DVec3::new(x, y, cl[j * nx + i]);
+        let (i, j) = (i as isize, j as isize);
+        let c = z(i, j);
+        let bend = |&(di, dj): &(isize, isize)| {
+            let (a, b) = (z(i - di, j - dj), z(i + di, j + dj));
+            if a >= c && b >= c {
+                (a + b - 2.0 * c) / ((di * di + dj * dj) as f64)
+            } else {
+                f64::NAN
+            }
+        };
+        let Some(&(di, dj)) = DIRS
+            .iter()
+            .filter(|d| bend(d).is_finite())
+            .max_by(|p, q| bend(p).total_cmp(&bend(q)))
+        else {
+            return node;
+        };
+        let (za, zb) = (z(i - 2 * di, j - 2 * dj), z(i + 2 * di, j + 2 * dj));
+        if za.is_nan() || zb.is_nan() {
+            return node;
+        }
+        let point = |t: f64| (x + t * di as f64 * g, y + t * dj as f64 * g);
+        // CL below the chord, and the CL point (None where not to go)
+        let below = |t: f64| -> Option<(f64, DVec3)> {
+            let (px, py) = point(t);
+            if !keep(px, py) {
+                return None;
+            }
+            let zc = hf.drop(tool, px, py)?.max(floor);
+            let chord = za + (zb - za) * (t + 2.0) / 4.0;
+            Some((chord - zc, DVec3::new(px, py, zc)))
+        };
+        let gap = |t: f64| below(t).map_or(f64::NEG_INFINITY, |b| b.0);
+        let phi = (5f64.sqrt() - 1.0) / 2.0;
+        let (mut lo, mut hi) = (-1.0f64, 1.0f64);
+        let (mut t1, mut t2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
+        let (mut g1, mut g2) = (gap(t1), gap(t2));
+        while hi - lo > 1e-3 {
+            if g1 >= g2 {
+                hi = t2;
+                (t2, g2) = (t1, g1);
+                t1 = hi - phi * (hi - lo);
+                g1 = gap(t1);
+            } else {
+                lo = t1;
+                (t1, g1) = (t2, g2);
+                t2 = lo + phi * (hi - lo);
+                g2 = gap(t2);
+            }
+        }
+        match below((lo + hi) / 2.0) {
+            Some((d, p)) if d >= gap(0.0) => p,
+            _ => node,
+        }
+    };
     trace(&valley, nx, ny, tool.working_diameter() / g)
-        .into_iter()
-        .map(|line| {
-            line.into_iter()
-                .map(|(i, j)| {
-                    let (x, y) = at(i, j);
-                    DVec3::new(x, y, cl[j * nx + i])
-                })
-                .collect()
-        })
+        .into_par_iter()
+        .map(|line| line.into_iter().map(|(i, j)| refined(i, j)).collect())
         .collect()
 }
 
@@ -155,33 +223,56 @@ mod tests {
     use super::*;
     use crate::grid::Grid;
 
-    /// A V groove along Y at x = 5 (walls 30 degrees up), 10 x 6 mm: the
-    /// pencil line runs its length, at its bottom.
-    #[test]
-    fn a_groove_gives_one_line_along_its_bottom() {
+    /// A relief 10 x 6 mm at 0.1 mm samples, its height a function of x.
+    fn across_x(f: impl Fn(f64) -> f64) -> HeightField {
         let pitch = 0.1;
         let (w, h) = (100, 60);
-        let z = Grid::from_vec(
-            w,
-            h,
-            (0..w * h)
-                .map(|k| {
-                    let x = ((k % w) as f64 + 0.5) * pitch;
-                    -2.0 + (x - 5.0).abs() * 30f64.to_radians().tan()
-                })
-                .collect(),
-        );
-        let hf = HeightField::new(z, pitch);
+        let z = (0..w * h).map(|k| f(((k % w) as f64 + 0.5) * pitch));
+        HeightField::new(Grid::from_vec(w, h, z.collect()), pitch)
+    }
+
+    /// A V groove along Y at x = 5 (walls 30 degrees up): the pencil line
+    /// runs its length, at its bottom.
+    #[test]
+    fn a_groove_gives_one_line_along_its_bottom() {
+        let hf = across_x(|x| -2.0 + (x - 5.0).abs() * 30f64.to_radians().tan());
         let tool = Tool::Ball { d: 1.0 };
-        let ls = lines(&hf, &tool, [1.0, 1.0, 9.0, 5.0], -3.0, 1.0, &|_, _| true);
+        // (the nodes, 0.125 mm apart, straddle the bottom)
+        let ls = lines(&hf, &tool, [1.05, 1.0, 9.0, 5.0], -3.0, 1.0, &|_, _| true);
         assert_eq!(ls.len(), 1, "{} lines", ls.len());
         let l = &ls[0];
         let len = (l[0] - l[l.len() - 1]).truncate().length();
         assert!(len > 3.5, "the line is {len} mm long");
         for p in l {
-            assert!((p.x - 5.0).abs() < 0.13, "off the groove at {p}");
+            assert!((p.x - 5.0).abs() < 0.01, "off the groove at {p}");
             let want = hf.drop(&tool, p.x, p.y).unwrap();
             assert!((p.z - want).abs() < 1e-9);
+        }
+    }
+
+    /// At the foot of a 60 degree wall rising from a floor the line runs
+    /// where the tool touches both: the last CL point on the floor.
+    #[test]
+    fn a_wall_s_foot_gives_its_corner() {
+        let hf = across_x(|x| -2.0 + (x - 5.0).max(0.0) * 60f64.to_radians().tan());
+        let tool = Tool::Ball { d: 1.0 };
+        // the corner, by a scan of the CL surface across it
+        let corner = (0..2000)
+            .map(|k| 3.0 + k as f64 * 0.001)
+            .take_while(|&x| hf.drop(&tool, x, 3.0).unwrap() < -2.0 + 1e-9)
+            .last()
+            .unwrap();
+        // nodes 0.125 mm apart: one 0.036 mm short of the corner, then
+        // one 0.003 mm past it (the node short of it then barely bends)
+        for x0 in [1.05, corner + 0.003 - 29.0 * 0.125] {
+            let ls = lines(&hf, &tool, [x0, 1.0, 9.0, 5.0], -3.0, 1.0, &|_, _| true);
+            assert_eq!(ls.len(), 1, "{} lines", ls.len());
+            for p in &ls[0] {
+                assert!(
+                    (p.x - corner).abs() < 0.005,
+                    "{p} off the corner at x = {corner}"
+                );
+            }
         }
     }
 
