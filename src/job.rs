@@ -7,7 +7,7 @@ use crate::grid::Grid;
 use crate::output::{check_writable, Outputs};
 use crate::relief::gradient::{shape_field, Field, Shaping};
 use crate::relief::panel::{Fade, Tilt};
-use crate::relief::{self, file, Method, Params, Relief, Stencil};
+use crate::relief::{self, file, Background, Method, Params, Relief, Stencil};
 use crate::scene::image_input::{load_png, ImageModel};
 use crate::scene::mesh::Mesh;
 use crate::scene::raster::DepthMap;
@@ -18,8 +18,8 @@ use std::path::PathBuf;
 
 /// Most pixels a relief may have, and why: 2^26, for memory. The 8192 px
 /// bunny (65 million pixels) with steps, bands, a preview and an STL
-/// peaks at 7.6 GB with `--flat-background` (its solver's vectors are
-/// f32) and 6.4 GB with the free background; 100 and 91 s.
+/// peaks at 7.6 GB with the flat background (the masked solver's vectors
+/// are f32) and 6.4 GB with the free one; 100 and 91 s.
 pub fn pixel_limit() -> (usize, &'static str) {
     (file::MAX_PIXELS, "allowed (memory)")
 }
@@ -44,7 +44,7 @@ pub struct ReliefJob {
     pub alpha: Option<f64>,
     pub silhouette: f64,
     pub steps_mm: Option<f64>,
-    pub flat_background: bool,
+    pub background: Background,
     /// `None` = the material's bands (or none).
     pub bands: Option<Vec<f64>>,
     pub emphasize: Vec<(String, f64)>,
@@ -80,7 +80,7 @@ impl Default for ReliefJob {
             alpha: None,
             silhouette: 8.0,
             steps_mm: None,
-            flat_background: false,
+            background: Background::Auto,
             bands: None,
             emphasize: Vec::new(),
             stencil: None,
@@ -146,7 +146,7 @@ impl ReliefJob {
                 .unwrap_or(DEFAULT_ALPHA),
             silhouette: self.silhouette,
             steps_mm: self.steps_mm,
-            flat_background: self.flat_background,
+            background: self.background,
             bands: self
                 .bands
                 .clone()
@@ -279,7 +279,7 @@ impl ReliefJob {
     pub fn relief(
         &self,
         sight: &Sight,
-        p: &Params,
+        p: &mut Params,
         t: &mut Timings,
     ) -> Result<(Relief, Field, Vec<String>)> {
         let (field, objects) = self.field(sight, p, t);
@@ -289,11 +289,13 @@ impl ReliefJob {
 
     /// The relief of a shaped field (which depends on the view and on
     /// the compression and silhouette settings only), with its warnings.
+    /// `p`'s background is then the one made (flat or free), for the
+    /// sidecar to say.
     pub fn relief_from(
         &self,
         field: &Field,
         objects: &[String],
-        p: &Params,
+        p: &mut Params,
         t: &mut Timings,
     ) -> Result<(Relief, Vec<String>)> {
         let stencils = self.stencils(field, objects)?;
@@ -302,6 +304,11 @@ impl ReliefJob {
             .into_iter()
             .chain(relief::background_rise(&relief, field, p))
             .collect();
+        p.background = if relief::holds_background(field, p) {
+            Background::Flat
+        } else {
+            Background::Free
+        };
         Ok((relief, warnings))
     }
 
@@ -394,12 +401,12 @@ impl ReliefJob {
 
     /// Run the whole job and write its outputs (all or nothing).
     pub fn run(&self, stage: &mut dyn FnMut(&str)) -> Result<Summary> {
-        let params = self.validate()?;
+        let mut params = self.validate()?;
         let mut t = Timings::default();
         stage("loading and rendering");
         let sight = self.see(None, &mut t)?;
         stage("integrating");
-        let (relief, field, warnings) = self.relief(&sight, &params, &mut t)?;
+        let (relief, field, warnings) = self.relief(&sight, &mut params, &mut t)?;
         drop(sight);
         stage("writing");
         let depth_png = self.depth_out.as_ref().map(|_| {

@@ -252,7 +252,7 @@ fn the_flat_field_stays_below_the_subject() {
         ),
     ] {
         let mut p = params(None);
-        p.flat_background = true;
+        p.background = relievo::relief::Background::Flat;
         let (h, f, _) = relief(model, cam, 160, &p);
         let (mut bg_lo, mut bg_hi, mut fg_lo) = (f32::MAX, f32::MIN, f32::MAX);
         for (v, m) in h.data.iter().zip(&f.mask.data) {
@@ -693,8 +693,9 @@ fn outline_ends_leave_no_flares() {
 /// A free background rises and falls round the subject by what its
 /// outline heights differ; past a fifth of the depth the relief says so
 /// (the demo, whose plane fills the view, is not told),
-/// with the figure the relief shows, and `--flat-background` holds it at
-/// 0 (and is not told again). A tilt slopes the field on purpose.
+/// with the figure the relief shows; by default a picture with a
+/// background holds it at 0 (and is not told again), and the sidecar says
+/// so. A tilt slopes the field on purpose.
 #[test]
 fn a_rising_free_background_is_said() {
     let d = scratch("background-rise");
@@ -709,7 +710,10 @@ fn a_rising_free_background_is_said() {
         String::from_utf8_lossy(&r.stderr).to_string()
     };
     let depth_out = d.join("depth.png").display().to_string();
-    let said = relief(&["--depth-out", &depth_out], "free.png");
+    let said = relief(
+        &["--free-background", "--depth-out", &depth_out],
+        "free.png",
+    );
     // the background's middle 98% as the PNG shows it, inside the
     // frame's margin (2.5% of the long side, at least 3 px, and one more)
     let (w, h, v, depth) = common::relief_mm(&d.join("free.png"));
@@ -742,8 +746,17 @@ fn a_rising_free_background_is_said() {
         (figure - spread).abs() < 0.05,
         "said {figure}, measured {spread}"
     );
-    let flat = relief(&["--flat-background"], "flat.png");
+    assert!(
+        said.contains("without --free-background it is held flat"),
+        "{said}"
+    );
+    // held flat by default, as the sidecar says
+    let flat = relief(&[], "flat.png");
     assert!(!flat.contains("free background"), "{flat}");
+    assert_eq!(
+        common::sidecar(&d.join("flat.png"))["params"]["relief"]["background"],
+        "flat"
+    );
     let (_, _, fv, _) = common::relief_mm(&d.join("flat.png"));
     let worst = fv
         .iter()
@@ -764,5 +777,12 @@ fn a_rising_free_background_is_said() {
     }
     let tilted = relief(&["--tilt", "1"], "tilt.png");
     assert!(!tilted.contains("free background"), "{tilted}");
+    // steps keep the free background by default (a held field cannot
+    // take half a step's spread), and the remedy is the flag
+    let stepped = relief(&["--steps", "0.3"], "steps.png");
+    assert!(
+        stepped.contains("--flat-background holds it flat"),
+        "{stepped}"
+    );
     std::fs::remove_dir_all(d).unwrap();
 }

@@ -183,16 +183,17 @@ fn rest_finishes_fandisk() {
     rest_finishes("rest-fandisk", Some(&shared_model("fandisk.obj")), &[]);
 }
 
-/// A flat background meets the subject in a crease all round (on the
-/// fandisk the foot of a 67 degree wall, where only a pencil pass in
-/// the corner reaches).
+/// The fandisk and Suzanne have a background, held flat by default: it
+/// meets the subject in a crease all round (on the fandisk the foot of a
+/// 67 degree wall, where only a pencil pass in the corner reaches). The
+/// same on the free background, which rises to meet the subject.
 #[test]
-fn rest_finishes_on_a_flat_background() {
+fn rest_finishes_on_a_free_background() {
     for (name, model) in [
-        ("rest-fandisk-flat", shared_model("fandisk.obj")),
-        ("rest-suzanne-flat", fixture("suzanne.stl")),
+        ("rest-fandisk-free", shared_model("fandisk.obj")),
+        ("rest-suzanne-free", fixture("suzanne.stl")),
     ] {
-        rest_finishes(name, Some(&model), &["--flat-background"]);
+        rest_finishes(name, Some(&model), &["--free-background"]);
     }
 }
 

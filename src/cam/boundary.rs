@@ -48,7 +48,7 @@ impl Subject {
         if hi - lo > tol {
             bail!(
                 "--boundary subject: the relief's background is not level (its border spans \
-                 {lo:.3}..{hi:.3} mm); make the relief with --flat-background"
+                 {lo:.3}..{hi:.3} mm); make the relief without --free-background"
             );
         }
         let inside = r.heights.map(|z| (*z as f64 - level).abs() > tol);

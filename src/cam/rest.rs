@@ -58,7 +58,7 @@ impl Unfinished {
                     *c = t.is_some_and(|t| *planned.top.get(i, j) as f64 - t > threshold);
                 }
             });
-        let near = grown(&left, (grow / stock.pitch).ceil() as usize);
+        let near = left.grown((grow / stock.pitch).ceil() as usize);
         Unfinished { stock, left, near }
     }
 
@@ -106,64 +106,4 @@ pub fn linked(
         out.push(p);
     }
     out
-}
-
-/// `g` grown by a disc of `k` cells: each row of the result ORs the rows
-/// within k, each widened by the disc's half-width at that offset
-/// (running counts along the row).
-fn grown(g: &Grid<bool>, k: usize) -> Grid<bool> {
-    let (w, h) = (g.w, g.h);
-    // per row, the count of set cells before each index
-    let prefix: Vec<Vec<u32>> = (0..h)
-        .into_par_iter()
-        .map(|j| {
-            let mut p = Vec::with_capacity(w + 1);
-            let mut n = 0;
-            p.push(0);
-            for i in 0..w {
-                n += *g.get(i, j) as u32;
-                p.push(n);
-            }
-            p
-        })
-        .collect();
-    let mut out = Grid::new(w, h, false);
-    let k = k as isize;
-    out.data.par_chunks_mut(w).enumerate().for_each(|(j, row)| {
-        for dj in -k..=k {
-            let jj = j as isize + dj;
-            if jj < 0 || jj >= h as isize {
-                continue;
-            }
-            let p = &prefix[jj as usize];
-            if p[w] == 0 {
-                continue;
-            }
-            let span = ((k * k - dj * dj) as f64).sqrt().floor() as usize;
-            for (i, c) in row.iter_mut().enumerate() {
-                if !*c {
-                    let (a, b) = (i.saturating_sub(span), (i + span + 1).min(w));
-                    *c = p[b] > p[a];
-                }
-            }
-        }
-    });
-    out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn growing_takes_a_disc() {
-        let mut g = Grid::new(9, 9, false);
-        g.set(4, 4, true);
-        let o = grown(&g, 2);
-        let n = o.data.iter().filter(|&&c| c).count();
-        // the cells within 2 of the centre: 1 + 4 * 2 (axes) + 4 (diagonal 1,1) = 13
-        assert_eq!(n, 13);
-        assert!(*o.get(4, 2) && *o.get(6, 4) && *o.get(5, 5));
-        assert!(!*o.get(6, 6) && !*o.get(6, 5));
-    }
 }

@@ -4,7 +4,7 @@
 use super::{print_timings, spinner};
 use clap::Args;
 use relievo::job::ReliefJob;
-use relievo::relief::Method;
+use relievo::relief::{Background, Method};
 use relievo::scene::{Camera, Up, View};
 use std::path::PathBuf;
 
@@ -63,9 +63,15 @@ pub struct ReliefOpts {
     /// Trace every outline with a constant step of this height (mm).
     #[arg(long, allow_negative_numbers = true)]
     pub steps: Option<f64>,
-    /// Hold the background flat at height 0 (Dirichlet) instead of free.
+    /// Hold the background flat at height 0 (Dirichlet), as a carved panel's field is level.
+    /// The default wherever the picture has a background (a tenth of it inside the frame's
+    /// margin); this holds even a scene's thin margin (the demo's)
     #[arg(long)]
     pub flat_background: bool,
+    /// Leave the background free (Neumann), as Weyrich et al. do: it then rises and falls round
+    /// the subject by what the subject's outline heights differ
+    #[arg(long, conflicts_with = "flat_background")]
+    pub free_background: bool,
     /// Feature-band gains, finest first, e.g. 2,1.5,1 [default: from --material].
     #[arg(long, value_delimiter = ',')]
     pub bands: Option<Vec<f64>>,
@@ -161,7 +167,11 @@ impl ReliefOpts {
             alpha: self.alpha,
             silhouette: self.silhouette,
             steps_mm: self.steps,
-            flat_background: self.flat_background,
+            background: match (self.flat_background, self.free_background) {
+                (true, _) => Background::Flat,
+                (_, true) => Background::Free,
+                _ => Background::Auto,
+            },
             bands: self.bands,
             emphasize: self.emphasize,
             stencil: self.stencil,

@@ -27,6 +27,22 @@ pub enum Method {
     Linear,
 }
 
+/// What becomes of the background (the pixels that show no surface).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Background {
+    /// Flat where the picture has a background to speak of (a tenth of
+    /// it inside the frame's margin), free where the scene fills the view
+    /// (the demo's plane: its margin is no field to stand on) and with
+    /// `--steps`.
+    Auto,
+    /// Held at 0 (Dirichlet), as a carved panel's field is level.
+    Flat,
+    /// Free (Neumann), as in Weyrich et al.: it rises and falls round the
+    /// subject by what the subject's outline heights differ.
+    Free,
+}
+
 /// Everything that shapes a relief after the field is made.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Params {
@@ -35,7 +51,7 @@ pub struct Params {
     pub alpha: f64,
     pub silhouette: f64,
     pub steps_mm: Option<f64>,
-    pub flat_background: bool,
+    pub background: Background,
     pub bands: Vec<f64>,
     pub mirror: bool,
     pub invert: bool,
@@ -183,14 +199,18 @@ fn divergence(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>) -> Grid<f64> {
     poisson::divergence(gx, gy, 1.0 / n as f64)
 }
 
-/// The field's slopes `gx`, `gy` integrated: free (Neumann) or with the
-/// background held at 0 and the subject kept on or above it.
-fn integrate(field: &Field, gx: &Grid<f32>, gy: &Grid<f32>, flat_background: bool) -> Grid<f64> {
+/// The field's slopes `gx`, `gy` integrated: free (Neumann), or held at 0
+/// off `subject` (a flat background) with the subject kept on or above it.
+fn integrate(
+    field: &Field,
+    gx: &Grid<f32>,
+    gy: &Grid<f32>,
+    subject: Option<&Grid<bool>>,
+) -> Grid<f64> {
     let div = divergence(field, gx, gy);
-    if flat_background {
-        poisson::solve_obstacle(&div, &field.mask).0
-    } else {
-        poisson::solve_neumann(&div)
+    match subject {
+        Some(s) => poisson::solve_obstacle(&div, s).0,
+        None => poisson::solve_neumann(&div),
     }
 }
 
@@ -208,7 +228,7 @@ pub fn unit_steps(field: &Field, flat_background: bool) -> Grid<f64> {
             field,
             &spread_steps(&field.sx),
             &spread_steps(&field.sy),
-            false,
+            None,
         )
     }
 }
@@ -331,33 +351,58 @@ fn spread98(v: &mut [f32]) -> f64 {
 /// background spans more than a fifth of the depth.
 pub fn background_rise(r: &Relief, field: &Field, p: &Params) -> Option<String> {
     // a tilt or fade slopes the field on purpose
-    if p.flat_background || p.method != Method::Gradient || p.tilt.is_some() || p.fade.is_some() {
+    if holds_background(field, p)
+        || p.method != Method::Gradient
+        || p.tilt.is_some()
+        || p.fade.is_some()
+    {
         return None;
     }
-    // the background inside the margin the camera frames every scene
-    // with (2% of its extent, at least 2.5 px): a scene that fills the
-    // view (the demo's plane) has none, and its margin is no field
-    let (w, h) = (r.heights.w, r.heights.h);
-    let band = ((0.025 * w.max(h) as f64).ceil() as usize).max(3) + 1;
-    let mut bg: Vec<f32> = Vec::new();
-    for y in band..h.saturating_sub(band) {
-        for x in band..w.saturating_sub(band) {
-            if !*field.mask.get(x, y) {
-                bg.push(*r.heights.get(x, y));
-            }
-        }
-    }
-    if bg.len() < w * h / 10 {
-        return None;
-    }
+    let mut bg = field_background(field, |x, y| *r.heights.get(x, y))?;
     let spread = spread98(&mut bg);
+    let remedy = if p.background == Background::Free {
+        "without --free-background it is held flat at 0"
+    } else {
+        // free by default with --steps
+        "--flat-background holds it flat at 0"
+    };
     (spread > 0.2 * r.depth_mm).then(|| {
         format!(
             "the free background rises and falls by {spread:.2} mm of the {} mm depth around the subject; \
-             --flat-background holds it flat at 0 and leaves the depth to the subject",
+             {remedy} and leaves the depth to the subject",
             r.depth_mm
         )
     })
+}
+
+/// `at` over the background inside the margin the camera frames every
+/// scene with (2.5% of its long side, at least 3 px, and one more), if
+/// that is at least a tenth of the picture: a scene that fills the view
+/// (the demo's plane) has none, and its margin is no field.
+fn field_background<T>(field: &Field, at: impl Fn(usize, usize) -> T) -> Option<Vec<T>> {
+    let (w, h) = (field.mask.w, field.mask.h);
+    let band = ((0.025 * w.max(h) as f64).ceil() as usize).max(3) + 1;
+    let mut bg = Vec::new();
+    for y in band..h.saturating_sub(band) {
+        for x in band..w.saturating_sub(band) {
+            if !*field.mask.get(x, y) {
+                bg.push(at(x, y));
+            }
+        }
+    }
+    (bg.len() >= w * h / 10).then_some(bg)
+}
+
+/// Whether the background is held at 0: asked for, or by default where
+/// the picture has one, unless `--steps` trace the outlines (a flat
+/// field cannot take half a step's spread, so each step would be the
+/// sampling's staircase where it meets the field).
+pub fn holds_background(field: &Field, p: &Params) -> bool {
+    match p.background {
+        Background::Flat => field.mask.data.iter().any(|&m| !m),
+        Background::Free => false,
+        Background::Auto => p.steps_mm.is_none() && field_background(field, |_, _| ()).is_some(),
+    }
 }
 
 /// Turn a shaped field into a relief.
@@ -404,24 +449,26 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
                     }
                 });
             }
-            if p.flat_background && field.mask.data.iter().all(|&m| m) {
+            // with a flat background (where there is any), no part of the
+            // subject below it
+            if p.background == Background::Flat && field.mask.data.iter().all(|&m| m) {
                 bail!("--flat-background: the input has no background pixels to hold at 0");
             }
             // with a flat background the solve keeps the subject on or
             // above the field; steps added to it can still sink a part
             // (an inner outline stepping down), which is then lifted
+            let hold = holds_background(field, p).then_some(&field.mask);
             let lift = |h: &mut Grid<f64>| {
-                if p.flat_background {
-                    lift_above_field(h, &field.mask);
+                if let Some(mask) = hold {
+                    lift_above_field(h, mask);
                 }
             };
-            let solve =
-                |gx: &Grid<f32>, gy: &Grid<f32>| integrate(field, gx, gy, p.flat_background);
+            let solve = |gx: &Grid<f32>, gy: &Grid<f32>| integrate(field, gx, gy, hold);
             match p.steps_mm {
                 Some(s) if field.silhouette_edges > 0 => {
                     // the steps first: if they alone exceed the depth, the
                     // main solve is not worth doing
-                    let steps = t.time("poisson (steps)", || unit_steps(field, p.flat_background));
+                    let steps = t.time("poisson (steps)", || unit_steps(field, hold.is_some()));
                     let nf = field.n_fine as f64;
                     if s * nf * range(&steps, &steps, 0.0) >= subject {
                         bail!("--steps {s}: the steps alone exceed the depth; use smaller steps");

@@ -6,7 +6,7 @@ use crate::bail;
 use crate::cam::{self, Finish, Origin, Stepover, ToolpathJob};
 use crate::error::Result;
 use crate::job::ReliefJob;
-use crate::relief::Method;
+use crate::relief::{Background, Method};
 use crate::scene::{Camera, Up, View};
 use clap::ValueEnum;
 use serde::Deserialize;
@@ -29,7 +29,7 @@ pub struct ReliefSettings {
     pub alpha: Option<f64>,
     pub silhouette: f64,
     pub steps: Option<f64>,
-    pub flat_background: bool,
+    pub background: Background,
     pub bands: Option<Vec<f64>>,
     pub emphasize: Vec<(String, f64)>,
     pub material: Option<String>,
@@ -57,7 +57,7 @@ impl Default for ReliefSettings {
             alpha: None,
             silhouette: j.silhouette,
             steps: None,
-            flat_background: false,
+            background: j.background,
             bands: None,
             emphasize: Vec::new(),
             material: None,
@@ -156,7 +156,7 @@ impl ReliefSettings {
             alpha: self.alpha,
             silhouette: self.silhouette,
             steps_mm: self.steps,
-            flat_background: self.flat_background,
+            background: self.background,
             bands: self.bands.clone(),
             emphasize: self.emphasize.clone(),
             material: self.material.clone(),
@@ -192,7 +192,8 @@ impl ReliefSettings {
         l.opt("alpha", self.alpha);
         l.num("silhouette", self.silhouette, d.silhouette);
         l.opt("steps", self.steps);
-        l.switch("flat-background", self.flat_background);
+        l.switch("flat-background", self.background == Background::Flat);
+        l.switch("free-background", self.background == Background::Free);
         if let Some(b) = &self.bands {
             let b: Vec<String> = b.iter().map(|x| num(*x)).collect();
             l.flag("bands", b.join(","));
@@ -381,12 +382,12 @@ mod tests {
             depth: Some(2.5),
             yaw: -12.25,
             emphasize: vec![("tea pot".into(), 2.0)],
-            flat_background: true,
+            background: Background::Free,
             ..Default::default()
         };
         assert_eq!(
             relief_command(Some("my model.obj"), &r),
-            "relievo relief 'my model.obj' --yaw -12.25 --depth 2.5 --flat-background \
+            "relievo relief 'my model.obj' --yaw -12.25 --depth 2.5 --free-background \
              --emphasize 'tea pot=2' -o relief.png"
         );
         let c = CutSettings {

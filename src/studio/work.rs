@@ -116,7 +116,7 @@ fn sight_key(s: &ReliefSettings) -> ReliefSettings {
         fov: s.fov,
         resolution: s.resolution,
         smooth: s.smooth,
-        flat_background: s.flat_background,
+        background: s.background,
         ..ReliefSettings::default()
     }
 }
@@ -271,7 +271,7 @@ impl Studio {
             ))));
         }
         let job = s.job(model.path.clone(), self.dir.join("relief.png"))?;
-        let params = job.validate()?;
+        let mut params = job.validate()?;
         let mut t = Timings::default();
         let key = sight_key(s);
         let shaping = (params.alpha, params.silhouette);
@@ -301,7 +301,7 @@ impl Studio {
             shaped: Some((shaping, shaped.clone())),
         });
         self.live(ticket)?;
-        let (relief, warnings) = job.relief_from(&shaped.0, &shaped.1, &params, &mut t)?;
+        let (relief, warnings) = job.relief_from(&shaped.0, &shaped.1, &mut params, &mut t)?;
         let made = Arc::new(Made {
             model_version: model.version,
             settings: s.clone(),

@@ -147,7 +147,7 @@ pub fn relief_params(steps: Option<f64>) -> relievo::relief::Params {
         alpha: 4.0,
         silhouette: 8.0,
         steps_mm: steps,
-        flat_background: false,
+        background: relievo::relief::Background::Free,
         bands: vec![],
         mirror: false,
         invert: false,

@@ -74,7 +74,7 @@ function reliefSettings() {
     resolution: parseInt($('resolution').value, 10),
     width: num('width'),
     silhouette: num('silhouette'),
-    flat_background: $('flat_background').checked,
+    background: $('background').value,
     mirror: $('mirror').checked,
     invert: $('invert').checked,
     method: $('method').value,
