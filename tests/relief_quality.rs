@@ -694,8 +694,8 @@ fn outline_ends_leave_no_flares() {
 /// outline heights differ; past a fifth of the depth the relief says so
 /// (the demo, whose plane fills the view, is not told),
 /// with the figure the relief shows; by default a picture with a
-/// background holds it at 0 (and is not told again), and the sidecar says
-/// so. A tilt slopes the field on purpose.
+/// background holds it at 0 (and is not told again), and the relief and
+/// its sidecar say so. A tilt slopes the field on purpose.
 #[test]
 fn a_rising_free_background_is_said() {
     let d = scratch("background-rise");
@@ -753,6 +753,8 @@ fn a_rising_free_background_is_said() {
     // held flat by default, as the sidecar says
     let flat = relief(&[], "flat.png");
     assert!(!flat.contains("free background"), "{flat}");
+    assert!(flat.contains("background: held flat at 0"), "{flat}");
+    assert!(!said.contains("held flat at 0 (the default"), "{said}");
     assert_eq!(
         common::sidecar(&d.join("flat.png"))["params"]["relief"]["background"],
         "flat"

@@ -39,7 +39,7 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     // all or nothing, also when interrupted: no relief without its job
     relievo::output::interrupt::hold();
     let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
-    super::relief::say_notes(&rjob, &r.warnings, quiet);
+    super::relief::say_notes(&rjob, &r, quiet);
     let s = match super::with_spinner(quiet, "planning and checking the job", || {
         cam.run(&r.relief)
     }) {

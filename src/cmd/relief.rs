@@ -125,15 +125,22 @@ pub struct ReliefOpts {
 }
 
 /// After a relief is made: the up axis a mesh was read with when its file
-/// type chose it (so that a model lying on its back is explained), and the
-/// relief's warnings.
-pub fn say_notes(job: &ReliefJob, warnings: &[String], quiet: bool) {
+/// type chose it (so that a model lying on its back is explained), the
+/// background when the picture chose to hold it flat, and the relief's
+/// warnings.
+pub fn say_notes(job: &ReliefJob, made: &relievo::job::Summary, quiet: bool) {
     let mesh = job.model.is_some() && !job.model_is("png");
     if let (false, (up, true), true) = (quiet, job.up(), mesh) {
         let kind = if up == Up::Z { "STL" } else { "OBJ" };
         eprintln!("up axis: {} ({kind} default; --up to change)", up.name());
     }
-    for w in warnings {
+    if !quiet && job.background == Background::Auto && made.params.background == Background::Flat {
+        eprintln!(
+            "background: held flat at 0 (the default where the picture has one; \
+             --free-background lets it float)"
+        );
+    }
+    for w in &made.warnings {
         eprintln!("warning: {w}");
     }
 }
@@ -207,7 +214,7 @@ pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> 
         pb.finish_and_clear();
     }
     let s = res?;
-    say_notes(&job, &s.warnings, quiet);
+    say_notes(&job, &s, quiet);
     if !quiet {
         let r = &s.relief;
         eprintln!(
