@@ -755,13 +755,7 @@ fn obstacle(
             go = (0..w * h)
                 .into_par_iter()
                 .map(|i| {
-                    go[i]
-                        || subject.data[i]
-                            && !free.data[i]
-                            && ((i % w > 0 && go[i - 1])
-                                || (i % w + 1 < w && go[i + 1])
-                                || (i >= w && go[i - w])
-                                || (i + w < w * h && go[i + w]))
+                    go[i] || subject.data[i] && !free.data[i] && neighbours(i, w, h).any(|j| go[j])
                 })
                 .collect();
         }

@@ -933,29 +933,11 @@ mod tests {
     /// Golden-section search for the maximum of a concave function on
     /// [lo, hi]: (argmax, max).
     fn golden(lo: f64, hi: f64, f: impl Fn(f64) -> f64) -> (f64, f64) {
-        let g = (5f64.sqrt() - 1.0) / 2.0;
-        let (mut a, mut b) = (lo, hi);
-        let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
-        let (mut fc, mut fd) = (f(c), f(d));
-        for _ in 0..64 {
-            if fc >= fd {
-                b = d;
-                (d, fd) = (c, fc);
-                c = b - g * (b - a);
-                fc = f(c);
-            } else {
-                a = c;
-                (c, fc) = (d, fd);
-                d = a + g * (b - a);
-                fd = f(d);
-            }
-        }
-        [(lo, f(lo)), (hi, f(hi)), (0.5 * (a + b), f(0.5 * (a + b)))]
-            .into_iter()
-            .fold(
-                (lo, f64::NEG_INFINITY),
-                |m, p| if p.1 > m.1 { p } else { m },
-            )
+        let mid = crate::toolpath::golden_max(lo, hi, 64, &f);
+        [(lo, f(lo)), (hi, f(hi)), (mid, f(mid))].into_iter().fold(
+            (lo, f64::NEG_INFINITY),
+            |m, p| if p.1 > m.1 { p } else { m },
+        )
     }
 
     /// The independent reference: over every triangle of the surface (as

@@ -51,32 +51,34 @@ pub fn lines(
             cl[j as usize * nx + i as usize]
         }
     };
+    // the CL curve's upward bend (1/mm) at node (i, j) across direction
+    // d over `k` steps, where the node is lowest of the three; NaN where
+    // it is not, or off the region (NaN compares false)
+    let bend = |i: isize, j: isize, (di, dj): (isize, isize), k: isize| {
+        let (a, c, b) = (
+            z(i - k * di, j - k * dj),
+            z(i, j),
+            z(i + k * di, j + k * dj),
+        );
+        let len2 = ((k * k * (di * di + dj * dj)) as f64) * g * g;
+        if a >= c && b >= c {
+            (a + b - 2.0 * c) / len2
+        } else {
+            f64::NAN
+        }
+    };
     // valley nodes: lowest across the direction of sharpest upward bend
     let valley: Vec<bool> = (0..nx * ny)
         .into_par_iter()
         .map(|k| {
             let (i, j) = ((k % nx) as isize, (k / nx) as isize);
-            let c = z(i, j);
-            if c.is_nan() {
-                return false;
-            }
-            DIRS.iter().any(|&(di, dj)| {
-                let (a, b) = (z(i - di, j - dj), z(i + di, j + dj));
-                let len2 = ((di * di + dj * dj) as f64) * g * g;
-                // (NaN compares false: off the region is no valley)
-                if !(a >= c && b >= c) {
-                    return false;
-                }
+            DIRS.iter().any(|&d| {
+                let one = bend(i, j, d, 1);
                 // a crease just short of the next node bends the CL
                 // curve little over one step, much over two (the next
                 // node already risen: a flat floor's nodes further out
                 // are not its valley)
-                let (a2, b2) = (z(i - 2 * di, j - 2 * dj), z(i + 2 * di, j + 2 * dj));
-                (a + b - 2.0 * c) / len2 >= kappa
-                    || ((a > c || b > c)
-                        && a2 >= c
-                        && b2 >= c
-                        && (a2 + b2 - 2.0 * c) / (4.0 * len2) >= kappa)
+                one >= kappa || (one > 0.0 && bend(i, j, d, 2) >= kappa)
             })
         })
         .collect();
@@ -89,19 +91,11 @@ pub fn lines(
         let (x, y) = at(i, j);
         let node = DVec3::new(x, y, cl[j * nx + i]);
         let (i, j) = (i as isize, j as isize);
-        let c = z(i, j);
-        let bend = |&(di, dj): &(isize, isize)| {
-            let (a, b) = (z(i - di, j - dj), z(i + di, j + dj));
-            if a >= c && b >= c {
-                (a + b - 2.0 * c) / ((di * di + dj * dj) as f64)
-            } else {
-                f64::NAN
-            }
-        };
+        let across = |&d: &(isize, isize)| bend(i, j, d, 1);
         let Some(&(di, dj)) = DIRS
             .iter()
-            .filter(|d| bend(d).is_finite())
-            .max_by(|p, q| bend(p).total_cmp(&bend(q)))
+            .filter(|d| across(d).is_finite())
+            .max_by(|p, q| across(p).total_cmp(&across(q)))
         else {
             return node;
         };
@@ -121,24 +115,9 @@ pub fn lines(
             Some((chord - zc, DVec3::new(px, py, zc)))
         };
         let gap = |t: f64| below(t).map_or(f64::NEG_INFINITY, |b| b.0);
-        let phi = (5f64.sqrt() - 1.0) / 2.0;
-        let (mut lo, mut hi) = (-1.0f64, 1.0f64);
-        let (mut t1, mut t2) = (hi - phi * (hi - lo), lo + phi * (hi - lo));
-        let (mut g1, mut g2) = (gap(t1), gap(t2));
-        while hi - lo > 1e-3 {
-            if g1 >= g2 {
-                hi = t2;
-                (t2, g2) = (t1, g1);
-                t1 = hi - phi * (hi - lo);
-                g1 = gap(t1);
-            } else {
-                lo = t1;
-                (t1, g1) = (t2, g2);
-                t2 = lo + phi * (hi - lo);
-                g2 = gap(t2);
-            }
-        }
-        match below((lo + hi) / 2.0) {
+        // 16 golden-section steps narrow [-1, 1] to under 1e-3
+        let t = super::golden_max(-1.0, 1.0, 16, gap);
+        match below(t) {
             Some((d, p)) if d >= gap(0.0) => p,
             _ => node,
         }
