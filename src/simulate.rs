@@ -249,6 +249,11 @@ impl SimulateJob {
             );
         }
         let mut cut = Grid::new(w, h, 0.0f32);
+        let surface = t.time("heightfield", || sim::surface_of(&relief));
+        let mut by_moves = sim::MoveGouge {
+            every_tool: true,
+            ..Default::default()
+        };
         let mut engagement = sim::Engagement::default();
         let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
         let mut time_by_tool: Vec<(String, f64)> = Vec::new();
@@ -278,6 +283,14 @@ impl SimulateJob {
                 })
                 .map_err(|e| crate::Error(format!("{what}: {e}")))?;
             last_tool = Some(runs[runs.len() - 1].2);
+            let g = t.time("gouge along moves", || {
+                sim::move_gouge(prog, &runs, &surface, panel_at)
+            });
+            // lines are numbered per file; a second file's follow on
+            by_moves = by_moves.max(sim::MoveGouge {
+                line: g.line.map(|n| n + lines),
+                ..g
+            });
             engagement.absorb(sim::Engagement::measure(prog, &moves, &runs, stock.pitch));
             // lines are numbered per file; a second file's follow on
             rapids.extend(r.iter().map(|n| n + lines));
@@ -301,20 +314,24 @@ impl SimulateJob {
             lines += prog.lines;
         }
         let tool = last_tool.expect("at least one job");
-        let (gouge, residual, mean, dev) = t.time("compare", || {
+        let (at_cells, residual, mean, dev) = t.time("compare", || {
             sim::deviation(&stock, &cut, &relief, panel_at)
         });
-        let max_gouge_at_mm = (gouge > 0.0)
+        let gouge = at_cells.max(by_moves.mm);
+        let max_gouge_line = by_moves.line.filter(|_| by_moves.mm >= at_cells);
+        let max_gouge_at_mm = (at_cells > 0.0 && max_gouge_line.is_none())
             .then(|| {
                 dev.data
                     .iter()
-                    .position(|&d| !d.is_nan() && -(d as f64) >= gouge)
+                    .position(|&d| !d.is_nan() && -(d as f64) >= at_cells)
                     .map(|k| stock.centre(k % dev.w, k / dev.w))
             })
             .flatten();
         let report = Report {
             max_gouge_mm: gouge,
             max_gouge_at_mm,
+            max_gouge_line,
+            gouge_exact_per_move: by_moves.every_tool,
             max_residual_mm: residual,
             mean_residual_mm: mean,
             removed_mm3: sim::removed(&stock, &cut),

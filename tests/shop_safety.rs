@@ -223,12 +223,12 @@ fn a_v_bit_ramps_into_the_stock_roughing_left() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
-/// A flat end mill's moves are probed where its rim leaves a sample or an
-/// edge of the relief's surface (where its CL surface bends down), not
-/// only where its axis crosses them: the 160 px demo's flat:2 finish cut
-/// 0.0134 mm into the surface between probes (simulated on cells a fifth
-/// of a sample: `simulate`'s own for a flat are the samples, under which
-/// the rim's cut is not seen); now under 0.002 mm.
+/// A flat end mill's moves are checked exactly along them against the
+/// relief's surface, where its rim meets an edge or a sample: the 160 px
+/// demo's flat:2 finish cut 0.0134 mm into the surface between probes at
+/// the axis' crossings alone, 0.0016 mm with probes where the rim met
+/// samples and edges; now under 0.001 mm, on cells a fifth of a sample
+/// and by the simulator's exact measure along every move.
 #[test]
 fn a_flat_end_mill_s_rim_keeps_off_the_surface_between_samples() {
     let d = scratch("safe-flat-rim");
@@ -239,10 +239,12 @@ fn a_flat_end_mill_s_rim_keeps_off_the_surface_between_samples() {
     );
     let gouge = rep["max_gouge_mm"].as_f64().unwrap();
     assert!(
-        gouge < 0.002,
-        "gouge {gouge} mm at {}",
-        rep["max_gouge_at_mm"]
+        gouge < 0.001,
+        "gouge {gouge} mm at {} {}",
+        rep["max_gouge_at_mm"],
+        rep["max_gouge_line"]
     );
+    assert!(rep["gouge_exact_per_move"].as_bool().unwrap());
     std::fs::remove_dir_all(d).unwrap();
 }
 

@@ -17,6 +17,8 @@ pub struct Judged {
     pub engagement: Engagement,
     /// Residual material over the relief: max and mean, mm.
     pub residual: (f64, f64),
+    /// The deepest cut into the relief: at the cells, and exactly along
+    /// every ball's and flat's move (`sim::move_gouge`).
     pub gouge: f64,
     /// Per file: every segment's cut, and the tool stretches.
     moves: Vec<(Vec<MoveCut>, sim::ToolRuns)>,
@@ -35,14 +37,18 @@ pub fn run(
     let mut cut = Grid::new(w, h, 0.0f32);
     let mut engagement = Engagement::default();
     let mut moves = Vec::new();
+    let at = (plan.shift.x, plan.shift.y);
+    let surface = sim::surface_of(relief);
+    let mut along = 0.0f64;
     for prog in progs {
         let shifted = prog.lowered(z_shift);
         let (_, m, runs) = sim::cut_program_measured(&stock, &mut cut, &shifted, None)?;
         engagement.absorb(Engagement::measure(&shifted, &m, &runs, stock.pitch));
+        along = along.max(sim::move_gouge(&shifted, &runs, &surface, at).mm);
         moves.push((m, runs));
     }
-    let at = (plan.shift.x, plan.shift.y);
-    let (gouge, res, mean, _) = sim::deviation(&stock, &cut, relief, at);
+    let (at_cells, res, mean, _) = sim::deviation(&stock, &cut, relief, at);
+    let gouge = at_cells.max(along);
     Ok(Judged {
         stock,
         cut,

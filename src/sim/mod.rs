@@ -17,6 +17,7 @@ use crate::machine::Machine;
 use crate::relief::Relief;
 use crate::sweep::{cells_between, Sweep};
 use crate::tool::Tool;
+use crate::toolpath::dropcutter::HeightField;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -85,9 +86,17 @@ impl Stock {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Report {
     pub max_gouge_mm: f64,
-    /// Where the deepest gouge is (job X, Y), if any.
+    /// Where the deepest gouge is (job X, Y), if the cells found it...
     #[serde(skip_serializing_if = "Option::is_none")]
     pub max_gouge_at_mm: Option<(f64, f64)>,
+    /// ...or the line of the move that cuts it, if the exact measure
+    /// along the moves (`move_gouge`) found it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_gouge_line: Option<usize>,
+    /// Whether every move's gouge was measured exactly along it (ball
+    /// and flat end mills); if not, a V or tapered ball's is measured at
+    /// the cells.
+    pub gouge_exact_per_move: bool,
     pub max_residual_mm: f64,
     pub mean_residual_mm: f64,
     pub removed_mm3: f64,
@@ -104,11 +113,13 @@ pub struct Report {
     /// The stock and relief placement read from the job's header.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub frame: Option<String>,
-    /// Gouge and residual are measured at the centres of stock cells this
-    /// far apart, against the relief's continuous surface...
+    /// Gouge (besides the exact measure) and residual are measured at
+    /// the centres of stock cells this far apart, against the relief's
+    /// continuous surface...
     pub cell_mm: f64,
     /// ...and a cut's bottom can reach at most this much deeper between
-    /// them (the tools' profile half a cell diagonal from the tip).
+    /// them (the tools' profile half a cell diagonal from the tip; a
+    /// flat's rim can cut deeper, which the exact measure sees).
     pub between_cells_mm: f64,
 }
 
@@ -127,21 +138,34 @@ impl Report {
                 )
             }
         };
+        let measured = if self.gouge_exact_per_move {
+            format!(
+                "gouge exact along every move, residual at cell centres {:.4} mm apart, \
+                 against the relief's surface",
+                self.cell_mm
+            )
+        } else {
+            format!(
+                "against the relief's surface at cell centres {:.4} mm apart (ball and flat \
+                 moves also exactly along them); a cut's bottom between them is at most \
+                 {:.4} mm deeper",
+                self.cell_mm, self.between_cells_mm
+            )
+        };
+        let at = match (self.max_gouge_line, self.max_gouge_at_mm) {
+            _ if self.max_gouge_mm < 5e-4 => String::new(),
+            (Some(n), _) => format!(" on line {n}"),
+            (None, Some((x, y))) => format!(" at X{x:.2} Y{y:.2}"),
+            _ => String::new(),
+        };
         format!(
-            "max gouge {:.4} mm{}, residual max {:.4} / mean {:.4} mm, removed {:.1} mm3\n\
-             (against the relief's surface at cell centres {:.4} mm apart; a cut's bottom \
-             between them is at most {:.4} mm deeper)\n\
+            "max gouge {:.4} mm{at}, residual max {:.4} / mean {:.4} mm, removed {:.1} mm3\n\
+             ({measured})\n\
              rapids in stock: {}\nout of travel: {}\nestimated time {} ({} lines)",
             self.max_gouge_mm,
-            self.max_gouge_at_mm
-                .filter(|_| self.max_gouge_mm >= 5e-4)
-                .map(|(x, y)| format!(" at X{x:.2} Y{y:.2}"))
-                .unwrap_or_default(),
             self.max_residual_mm,
             self.mean_residual_mm,
             self.removed_mm3,
-            self.cell_mm,
-            self.between_cells_mm,
             list(&self.rapids_in_stock),
             list(&self.out_of_travel),
             hms(self.time_s),
@@ -676,6 +700,84 @@ pub fn deviation(
     (gouge, res, if n > 0 { sum / n as f64 } else { 0.0 }, dev)
 }
 
+/// The deepest cut of a job's moves into the relief's continuous surface,
+/// measured exactly along each move for a ball or flat end mill
+/// (`HeightField::rise_along`, the check the toolpath itself passes):
+/// what stock cells alone can miss between their centres, where a flat's
+/// rim meets the surface.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MoveGouge {
+    /// How deep (mm; 0 when none).
+    pub mm: f64,
+    /// The line of the move that cuts deepest, if any cuts.
+    pub line: Option<usize>,
+    /// Whether every tool was measured so (a V or tapered ball is not).
+    pub every_tool: bool,
+}
+
+impl MoveGouge {
+    /// Both measures of one job or a series of jobs.
+    pub fn max(self, o: MoveGouge) -> MoveGouge {
+        let deeper = if o.mm > self.mm { o } else { self };
+        MoveGouge {
+            every_tool: self.every_tool && o.every_tool,
+            ..deeper
+        }
+    }
+}
+
+/// The relief's continuous surface as the drop-cutter sees it: its top
+/// at Z 0, its lower-left corner at X, Y 0.
+pub fn surface_of(relief: &Relief) -> HeightField {
+    HeightField::new(
+        relief.heights.map(|v| *v as f64 - relief.depth_mm),
+        relief.pitch_mm(),
+    )
+}
+
+/// `MoveGouge` of `prog`'s runs against `hf`, the relief's surface with
+/// its lower-left corner at job X, Y `at` and its top at Z 0. A tool
+/// whose side only touches the surface does not cut it: the tool is taken
+/// a G-code unit (`GRID`) narrower, so a cut-out's slot, a radius outside
+/// the panel, does not read as cutting the panel's side wall.
+pub fn move_gouge(prog: &Program, runs: &ToolRuns, hf: &HeightField, at: (f64, f64)) -> MoveGouge {
+    use crate::toolpath::along::Bottom;
+    use crate::toolpath::path::GRID;
+    let shift = DVec3::new(at.0, at.1, 0.0);
+    let mut out = MoveGouge {
+        mm: 0.0,
+        line: None,
+        every_tool: true,
+    };
+    for (from, to, tool) in runs {
+        let bottom = match Bottom::of(tool) {
+            Some(Bottom::Ball(r)) => Bottom::Ball(r - GRID),
+            Some(Bottom::Flat(r)) => Bottom::Flat(r - GRID),
+            None => {
+                out.every_tool = false;
+                continue;
+            }
+        };
+        let worst = prog.segments[*from..*to]
+            .par_iter()
+            .filter_map(|s| {
+                hf.rise_along(bottom, s.a - shift, s.b - shift, 0.0)
+                    .map(|g| (g, s.line))
+            })
+            .reduce_with(|a, b| {
+                if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
+                    b
+                } else {
+                    a
+                }
+            });
+        if let Some((g, line)) = worst.filter(|w| w.0 > out.mm) {
+            (out.mm, out.line) = (g, Some(line));
+        }
+    }
+    out
+}
+
 /// Volume removed from the stock (mm^3).
 pub fn removed(stock: &Stock, cut: &Grid<f32>) -> f64 {
     let floor = -stock.thickness;
@@ -722,6 +824,59 @@ mod tests {
             let (u, v) = (cx / 0.5 - 0.5, (6.0 - cy) / 0.5 - 0.5);
             assert!((u - u.round()).abs() < 1e-9 && (v - v.round()).abs() < 1e-9);
         }
+    }
+
+    /// A flat's rim passing 0.02 mm beside a sample 0.5 mm high cuts the
+    /// surface round it (the triangles there stand 0.49 mm high) where no
+    /// stock cell centre lies: the cells see nothing, the exact measure
+    /// along the move sees the 0.39 mm and its line. A ball's move 1.6
+    /// mm beside it cuts nothing.
+    #[test]
+    fn a_flat_s_rim_between_cells_is_measured_along_the_move() {
+        let mut heights = Grid::new(20, 20, 0.0f32);
+        heights.set(10, 10, 0.5);
+        let relief = Relief {
+            heights,
+            width_mm: 20.0,
+            height_mm: 20.0,
+            depth_mm: 1.0,
+        };
+        // the sample's centre (10.5, 9.5); Z 0 is the relief's top, the
+        // level field at -1.0, the move 0.1 above it
+        let (r, z) = (1.0, -0.9);
+        let y = 9.5 + r + 0.02;
+        let job = format!(
+            "(tool: flat:2)\nG21 G90\nG0 X2 Y{y} Z1\nG1 Z{z} F300\nG1 X18 Y{y} Z{z}\nG0 Z1\n"
+        );
+        let prog = program(&job).unwrap();
+        let stock = Stock {
+            x0: 0.0,
+            y0: 0.0,
+            width: 20.0,
+            height: 20.0,
+            thickness: 3.0,
+            pitch: 1.0,
+        }
+        .aligned_to(0.0, 20.0);
+        let (w, h) = stock.cells();
+        let mut cut = Grid::new(w, h, 0.0f32);
+        let (_, _, runs) = cut_program_measured(&stock, &mut cut, &prog, None).unwrap();
+        let (at_cells, _, _, _) = deviation(&stock, &cut, &relief, (0.0, 0.0));
+        let along = move_gouge(&prog, &runs, &surface_of(&relief), (0.0, 0.0));
+        assert!(at_cells < 1e-9, "cells {at_cells}");
+        // (the tool taken a G-code unit narrower)
+        let expected = 0.5 * (1.0 - 0.02 - crate::toolpath::path::GRID) - 0.1;
+        assert!((along.mm - expected).abs() < 1e-9, "{along:?}");
+        assert_eq!((along.line, along.every_tool), (Some(5), true));
+        let clear = format!("{}", 9.5 + 1.6);
+        let ball = program(
+            &job.replace("flat:2", "ball:2")
+                .replace(&format!("Y{y}"), &format!("Y{clear}")),
+        )
+        .unwrap();
+        let runs = tool_runs(&ball, None).unwrap();
+        let none = move_gouge(&ball, &runs, &surface_of(&relief), (0.0, 0.0));
+        assert_eq!((none.mm, none.line), (0.0, None));
     }
 
     /// A wall left 0.09 mm proud along a pre-cut channel is shaved by the

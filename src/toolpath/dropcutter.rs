@@ -19,6 +19,7 @@
 //! plane's bound prunes what the corner's cannot (2048 px bunny raster
 //! drops 424k -> 760-825k points/s; ball:12 162k -> 444-513k).
 
+use super::along::Bottom;
 use crate::grid::Grid;
 use crate::surface::Lattice;
 use crate::tool::Tool;
@@ -525,16 +526,23 @@ impl HeightField {
         (contact.0 != usize::MAX && best.is_finite()).then_some((best, contact))
     }
 
-    /// A ball of radius `r` moved straight from tip a to tip b: the
+    /// A ball or flat end mill moved straight from tip a to tip b: the
     /// highest the exact CL surface rises over the move (how deep the move
     /// would cut), if more than `floor`, else None. Branch and bound as
-    /// for a drop, a block bounded by its highest corner less the ball's
+    /// for a drop, a block bounded by its highest corner less the tool's
     /// lowest over the block's nearest point to the move's path, and less
     /// the path's lower end; every cell that may beat the best found gets
     /// its features' exact rises (`along`).
-    pub fn rise_along(&self, r: f64, a: glam::DVec3, b: glam::DVec3, floor: f64) -> Option<f64> {
+    pub fn rise_along(
+        &self,
+        bottom: Bottom,
+        a: glam::DVec3,
+        b: glam::DVec3,
+        floor: f64,
+    ) -> Option<f64> {
         let path = super::along::Path { a, d: b - a };
-        let below = |d2: f64| d2 / (2.0 * r);
+        let r = bottom.radius();
+        let below = |d2: f64| bottom.below(d2);
         let p = self.pitch;
         let (dx, dy) = (b.x - a.x, b.y - a.y);
         let len2 = dx * dx + dy * dy;
@@ -569,7 +577,7 @@ impl HeightField {
                 let q = path.a + path.d * t;
                 pl.at(q.x, q.y) - q.z
             };
-            at(lo).max(at(hi)) + pl.ball_lift(r) + pl.e
+            at(lo).max(at(hi)) + bottom.lift(pl.ax * pl.ax + pl.ay * pl.ay) + pl.e
         };
         let mut best = floor;
         let reach = (2.0 * r / p).max(1.0);
@@ -601,7 +609,11 @@ impl HeightField {
             if level == 0 {
                 let (d2, low, _) = near(0, bx, by);
                 let high = *self.levels[0].get(bx, by);
-                best = best.max(self.cell_rise(&path, r, bx, by, (d2, low, high), best));
+                let cell = (d2, low, high);
+                best = best.max(match bottom {
+                    Bottom::Ball(r) => self.cell_rise(&path, r, bx, by, cell, best),
+                    Bottom::Flat(r) => self.flat_cell_rise(&path, r, bx, by, cell, best),
+                });
                 continue;
             }
             let child = &self.levels[level - 1];
@@ -656,9 +668,7 @@ impl HeightField {
         best: f64,
     ) -> f64 {
         let [a, b, c, d] = self.corners(i, j);
-        let ([x0, yt, za], [x1, yb, zd]) = (a, d);
-        let (zb, zc) = (b[2], c[2]);
-        let (cw, ch) = (x1 - x0, yt - yb);
+        let (cw, ch) = (d[0] - a[0], a[1] - d[1]);
         let corners = [a, b, c, d]
             .iter()
             .map(|v| path.vertex(r, *v))
@@ -676,18 +686,57 @@ impl HeightField {
             best = best.max(path.edge(r, p, q));
         }
         if cw > 0.0 && ch > 0.0 {
-            let uv = |x: f64, y: f64| ((x - x0) / cw, (yt - y) / ch);
-            let upper = path.facet(r, a, ((zb - za) / cw, (za - zc) / ch), |x, y| {
-                let (u, v) = uv(x, y);
-                [u, v, 1.0 - u - v]
-            });
-            let lower = path.facet(r, d, ((zd - zc) / cw, (zb - zd) / ch), |x, y| {
-                let (u, v) = uv(x, y);
-                [1.0 - u, 1.0 - v, u + v - 1.0]
-            });
-            best = best.max(upper).max(lower);
+            best = best.max(self.facets_rise(path, Bottom::Ball(r), i, j));
         }
         best
+    }
+
+    /// The highest rise of the cell's two facets over `path`.
+    fn facets_rise(&self, path: &super::along::Path, bottom: Bottom, i: usize, j: usize) -> f64 {
+        let [a, b, c, d] = self.corners(i, j);
+        let ([x0, yt, za], [x1, yb, zd]) = (a, d);
+        let (zb, zc) = (b[2], c[2]);
+        let (cw, ch) = (x1 - x0, yt - yb);
+        let uv = |x: f64, y: f64| ((x - x0) / cw, (yt - y) / ch);
+        let upper = path.facet(bottom, a, ((zb - za) / cw, (za - zc) / ch), |x, y| {
+            let (u, v) = uv(x, y);
+            [u, v, 1.0 - u - v]
+        });
+        let lower = path.facet(bottom, d, ((zd - zc) / cw, (zb - zd) / ch), |x, y| {
+            let (u, v) = uv(x, y);
+            [1.0 - u, 1.0 - v, u + v - 1.0]
+        });
+        upper.max(lower)
+    }
+
+    /// `cell_rise` for a flat of radius `r`: no point of the cell holds
+    /// the tip above the cell's highest corner, so unless that beats
+    /// `best` the corners settle it.
+    fn flat_cell_rise(
+        &self,
+        path: &super::along::Path,
+        r: f64,
+        i: usize,
+        j: usize,
+        (_, low, high): (f64, f64, f64),
+        best: f64,
+    ) -> f64 {
+        let [a, b, c, d] = self.corners(i, j);
+        let mut top = [a, b, c, d]
+            .iter()
+            .map(|v| path.flat_vertex(r, *v))
+            .fold(f64::NEG_INFINITY, f64::max);
+        if high - low <= best.max(top) {
+            return top;
+        }
+        for (p, q) in [(a, b), (a, c), (b, c), (b, d), (c, d)] {
+            top = top.max(path.flat_edge(r, p, q));
+        }
+        let (cw, ch) = (d[0] - a[0], a[1] - d[1]);
+        if cw > 0.0 && ch > 0.0 {
+            top = top.max(self.facets_rise(path, Bottom::Flat(r), i, j));
+        }
+        top
     }
 
     /// Every cell in turn, no pruning (checks the branch and bound).
@@ -1122,46 +1171,57 @@ mod tests {
     /// (the highest of concave pieces lies inside one of them): the
     /// exact rise is never below it and at most 1e-7 mm above, for level,
     /// rising and falling moves over waves, noise and a one-sample step,
-    /// including moves clear of the surface and ones cutting deep.
+    /// including moves clear of the surface and ones cutting deep. A
+    /// flat's CL surface steps where a sample enters its disc, so its
+    /// highest may lie at such a step, between drops: there the exact
+    /// rise may exceed the drops by what the move climbs between two.
     #[test]
     fn the_rise_along_a_move_matches_dense_drops() {
         for (seed, rough) in [(3, false), (8, true)] {
             let hf = field(60, 48, 0.25, seed, rough);
             let mut rnd = rng(seed + 100);
             for (r, n) in [(1.5875, 60), (0.5, 60)] {
-                let tool = Tool::Ball { d: 2.0 * r };
-                for _ in 0..n {
-                    let (x, y) = (2.5 + 10.0 * rnd(), 2.5 + 7.0 * rnd());
-                    let (len, ang) = (0.05 + 2.0 * rnd(), std::f64::consts::TAU * rnd());
-                    let (bx, by) = (x + len * ang.cos(), y + len * ang.sin());
-                    let za = hf.drop(&tool, x, y).unwrap() + 0.3 * (rnd() - 0.6);
-                    let zb = match (rnd() * 3.0) as usize {
-                        0 => za,
-                        _ => hf.drop(&tool, bx, by).unwrap() + 0.3 * (rnd() - 0.6),
-                    };
-                    let (a, b) = (glam::DVec3::new(x, y, za), glam::DVec3::new(bx, by, zb));
-                    let rise = |t: f64| {
-                        let q = a + (b - a) * t;
-                        hf.drop(&tool, q.x, q.y).unwrap_or(f64::NEG_INFINITY) - q.z
-                    };
-                    let m = 2000;
-                    let (k, top) = (0..=m)
-                        .map(|k| (k, rise(k as f64 / m as f64)))
-                        .fold((0, f64::NEG_INFINITY), |b, p| if p.1 > b.1 { p } else { b });
-                    let lo = (k.max(1) - 1) as f64 / m as f64;
-                    let hi = ((k + 1).min(m)) as f64 / m as f64;
-                    let reference = top.max(golden(lo, hi, rise).1);
-                    let exact = hf
-                        .rise_along(r, a, b, f64::NEG_INFINITY)
-                        .unwrap_or_else(|| panic!("none: r {r} {a} -> {b}, dense {reference}"));
-                    assert!(
-                        exact >= reference - 1e-9 && exact <= reference + 1e-7,
-                        "r {r}, {a} -> {b}: exact {exact}, dense {reference}"
-                    );
-                    // with a floor: None exactly when it is not passed
-                    let floor = reference - 1e-3;
-                    assert_eq!(hf.rise_along(r, a, b, floor).is_some(), exact > floor);
-                    assert!(hf.rise_along(r, a, b, exact + 1e-6).is_none());
+                for tool in [Tool::Ball { d: 2.0 * r }, Tool::Flat { d: 2.0 * r }] {
+                    let bottom = Bottom::of(&tool).unwrap();
+                    for _ in 0..n {
+                        let (x, y) = (2.5 + 10.0 * rnd(), 2.5 + 7.0 * rnd());
+                        let (len, ang) = (0.05 + 2.0 * rnd(), std::f64::consts::TAU * rnd());
+                        let (bx, by) = (x + len * ang.cos(), y + len * ang.sin());
+                        let za = hf.drop(&tool, x, y).unwrap() + 0.3 * (rnd() - 0.6);
+                        let zb = match (rnd() * 3.0) as usize {
+                            0 => za,
+                            _ => hf.drop(&tool, bx, by).unwrap() + 0.3 * (rnd() - 0.6),
+                        };
+                        let (a, b) = (glam::DVec3::new(x, y, za), glam::DVec3::new(bx, by, zb));
+                        let rise = |t: f64| {
+                            let q = a + (b - a) * t;
+                            hf.drop(&tool, q.x, q.y).unwrap_or(f64::NEG_INFINITY) - q.z
+                        };
+                        let m = 8000;
+                        let (k, top) = (0..=m)
+                            .map(|k| (k, rise(k as f64 / m as f64)))
+                            .fold((0, f64::NEG_INFINITY), |b, p| if p.1 > b.1 { p } else { b });
+                        let lo = (k.max(1) - 1) as f64 / m as f64;
+                        let hi = ((k + 1).min(m)) as f64 / m as f64;
+                        let reference = top.max(golden(lo, hi, rise).1);
+                        let exact = hf
+                            .rise_along(bottom, a, b, f64::NEG_INFINITY)
+                            .unwrap_or_else(|| {
+                                panic!("none: {tool:?} {a} -> {b}, dense {reference}")
+                            });
+                        let between = match tool {
+                            Tool::Flat { .. } => (zb - za).abs() / m as f64,
+                            _ => 0.0,
+                        };
+                        assert!(
+                            exact >= reference - 1e-9 && exact <= reference + 1e-7 + between,
+                            "{tool:?}, {a} -> {b}: exact {exact}, dense {reference}"
+                        );
+                        // with a floor: None exactly when it is not passed
+                        let floor = reference - 1e-3;
+                        assert_eq!(hf.rise_along(bottom, a, b, floor).is_some(), exact > floor);
+                        assert!(hf.rise_along(bottom, a, b, exact + 1e-6).is_none());
+                    }
                 }
             }
         }

@@ -2,6 +2,7 @@
 //! straight move between two CL points would dip into the CL surface,
 //! and checked against the relief (thinned by `merge`).
 
+use super::along::Bottom;
 use super::dropcutter::HeightField;
 use super::merge::merge;
 use crate::tool::Tool;
@@ -170,8 +171,8 @@ pub fn drop_along(
 pub const CHECK: f64 = 2e-4;
 
 /// How deep the straight move a -> b would cut into the relief's surface
-/// (<= 0 when it cuts none). A ball's is exact: the highest the CL
-/// surface rises over the move (`HeightField::rise_along`; rises under
+/// (<= 0 when it cuts none). A ball's or flat's is exact: the highest the
+/// CL surface rises over the move (`HeightField::rise_along`; rises under
 /// CHECK / 2 count as none). Other tools: the exact swept tool against
 /// every sample it passes, then the drop-cutter at probes between them
 /// (`probe_gouge`).
@@ -180,10 +181,8 @@ pub const CHECK: f64 = 2e-4;
 /// the tool touches no sample, which spares the sweep behind the lower
 /// end (`sample_gouge`).
 pub fn move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: bool) -> f64 {
-    if let Tool::Ball { .. } = tool {
-        return hf
-            .rise_along(tool.radius(), a, b, 0.5 * CHECK)
-            .unwrap_or(0.0);
+    if let Some(bottom) = Bottom::of(tool) {
+        return hf.rise_along(bottom, a, b, 0.5 * CHECK).unwrap_or(0.0);
     }
     let at_samples = sample_gouge(hf, tool, a, b, ends_on_cl);
     at_samples.max(probe_gouge(hf, tool, a, b, at_samples.max(0.5 * CHECK)))
@@ -267,13 +266,11 @@ fn dropped_move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, drops: 
 /// centre surface and on level ground bends as the ball (at 2048 px the
 /// spacing is 0.036 mm, not half a sample: the 2048 px bunny raster 2.92
 /// -> 2.43 s, same gouge); a tapered ball's flank makes peaks over
-/// vertices, so its probes stay at least two a sample; a flat's rim
-/// riding an edge bends its CL surface sharply, so four a sample.
+/// vertices, so its probes stay at least two a sample.
 fn probe_spacing(hf: &HeightField, tool: &Tool) -> f64 {
     match *tool {
         Tool::Ball { d } => (2.0 * CHECK * d).sqrt(),
         Tool::TaperBall { tip_r, .. } => (4.0 * CHECK * tip_r).sqrt().min(0.5 * hf.pitch),
-        Tool::Flat { .. } => 0.25 * hf.pitch,
         _ => 0.5 * hf.pitch,
     }
 }
@@ -325,66 +322,10 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
     };
     // a ball's or tapered tip's CL surface has no creases (each triangle
     // holds it on a smooth surface): the curvature spacing alone will do
-    if matches!(tool, Tool::VBit { .. } | Tool::Flat { .. }) {
+    if matches!(tool, Tool::VBit { .. }) {
         cross(a.x, d.x, 0.5 * p);
         cross(top - a.y, -d.y, 0.5 * p);
         cross(a.x + top - a.y, d.x - d.y, 0.0);
-    }
-    // a flat's CL surface is the highest of the relief under its disc; it
-    // bends down (where a chord would cut in) where a sample or an edge
-    // leaves the disc: where the rim is a radius from an edge's line or
-    // from a sample as high as the move (the 160 px demo's flat:2 finish
-    // cut 0.0134 mm into the surface between probes at the axis'
-    // crossings alone, now 0.0013-0.0016; the 512 px flat:3.175 carve
-    // takes 2.4 s instead of 1.3)
-    if let Tool::Flat { d: dia } = *tool {
-        let r = dia / 2.0;
-        for s in [-1.0, 1.0] {
-            cross(a.x + s * r, d.x, 0.5 * p);
-            cross(top - a.y + s * r, -d.y, 0.5 * p);
-            cross(
-                a.x + top - a.y + s * r * std::f64::consts::SQRT_2,
-                d.x - d.y,
-                0.0,
-            );
-        }
-        use crate::sweep::cells_between;
-        let z = hf.samples();
-        let (lo, hi) = (a.min(b), a.max(b));
-        let dd = d.truncate().length_squared();
-        let span = cells_between(lo.x - r, hi.x + r, p, z.w).zip(cells_between(
-            top - hi.y - r,
-            top - lo.y + r,
-            p,
-            z.h,
-        ));
-        // (a long slanted move's box would hold most of the relief)
-        let small = |((i0, i1), (j0, j1)): &((usize, usize), (usize, usize))| {
-            (i1 - i0 + 1) * (j1 - j0 + 1) < 1 << 20
-        };
-        if let (Some(((i0, i1), (j0, j1))), true) = (span.filter(small), dd > 0.0) {
-            // only a sample that may hold the tool as high as the move
-            let low = a.z.min(b.z) + floor;
-            for j in j0..=j1 {
-                for i in i0..=i1 {
-                    if *z.get(i, j) < low {
-                        continue;
-                    }
-                    // |a + t d - v|^2 = r^2
-                    let (vx, vy) = hf.centre(i, j);
-                    let (ex, ey) = (a.x - vx, a.y - vy);
-                    let bq = ex * d.x + ey * d.y;
-                    let disc = bq * bq - dd * (ex * ex + ey * ey - r * r);
-                    if disc > 0.0 {
-                        for t in [(-bq - disc.sqrt()) / dd, (-bq + disc.sqrt()) / dd] {
-                            if t > 0.0 && t < 1.0 {
-                                ts.push(t);
-                            }
-                        }
-                    }
-                }
-            }
-        }
     }
     ts.sort_unstable_by(f64::total_cmp);
     let spacing = probe_spacing(hf, tool);

@@ -581,7 +581,8 @@ fn refine_move(
 /// the move. A ball's or tapered tip's CL surface is smooth and the move
 /// short (a node pitch): its rise peaks near the middle, and three probes
 /// find it (`clear` checks the thinned moves exactly). A flat or V tool's
-/// CL surface has creases: every probe `probe_gouge` makes, then the
+/// CL surface has creases: whether it rises (exactly for a flat,
+/// `rise_along`; a V at every probe `probe_gouge` makes), then the
 /// highest of a dense scan.
 fn peak(
     hf: &HeightField,
@@ -590,6 +591,7 @@ fn peak(
     a: DVec3,
     b: DVec3,
 ) -> Option<(f64, DVec3)> {
+    use super::along::Bottom;
     use super::path::probe_gouge;
     if matches!(tool, Tool::Ball { .. } | Tool::TaperBall { .. }) {
         let mut stack = Vec::new();
@@ -619,7 +621,11 @@ fn peak(
         }
         return top;
     }
-    if probe_gouge(hf, tool, a, b, REFINE_DIP) <= REFINE_DIP {
+    let rises = match Bottom::of(tool) {
+        Some(bottom) => hf.rise_along(bottom, a, b, REFINE_DIP).is_some(),
+        None => probe_gouge(hf, tool, a, b, REFINE_DIP) > REFINE_DIP,
+    };
+    if !rises {
         return None;
     }
     let n = ((b - a).truncate().length() / (hf.pitch / 4.0))
