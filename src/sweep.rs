@@ -65,17 +65,34 @@ pub struct Sweep {
     pub axy: f64,
     pub r: f64,
     pub tool: Tool,
+    /// A V's or tapered ball's cone: its slope k (rise per mm out), the
+    /// tapered ball's radius r0 where the tip sphere meets it, and its
+    /// height at the axis' line c0 (its rise is c0 + k rho past r0): the
+    /// trigonometry once per move, not per cell.
+    cone: (f64, f64, f64),
 }
 
 impl Sweep {
     pub fn new(a: DVec3, b: DVec3, tool: Tool) -> Sweep {
         let d = b - a;
+        let cone = match tool {
+            Tool::VBit { angle, .. } => (1.0 / (angle.to_radians() / 2.0).tan(), 0.0, 0.0),
+            Tool::TaperBall {
+                tip_r, half_angle, ..
+            } => {
+                let ha = half_angle.to_radians();
+                let (k, r0) = (1.0 / ha.tan(), tip_r * ha.cos());
+                (k, r0, tip_r * (1.0 - ha.sin()) - r0 * k)
+            }
+            _ => (0.0, 0.0, 0.0),
+        };
         Sweep {
             a,
             d,
             axy: d.x * d.x + d.y * d.y,
             r: tool.radius(),
             tool,
+            cone,
         }
     }
 
@@ -142,17 +159,15 @@ impl Sweep {
                 Some((lo, hi)) => a.z + d.z * if d.z < 0.0 { hi } else { lo },
                 None => f64::INFINITY,
             },
-            Tool::VBit { angle, .. } => {
+            Tool::VBit { .. } => {
                 let Some((lo, hi)) = self.interval(wx, wy) else {
                     return f64::INFINITY;
                 };
-                let k = 1.0 / (angle.to_radians() / 2.0).tan();
+                let k = self.cone.0;
                 let t = self.cone_t(wx, wy, k, lo, hi);
                 a.z + d.z * t + k * self.rho(wx, wy, t)
             }
-            Tool::TaperBall {
-                tip_r, half_angle, ..
-            } => {
+            Tool::TaperBall { tip_r, .. } => {
                 // the tip sphere swept (where the tool is not the sphere
                 // the sphere lies inside it, so it never undercuts), and
                 // the cone frustum r0 <= rho <= R, convex in t on each of
@@ -164,9 +179,7 @@ impl Sweep {
                 let Some((lo, hi)) = self.interval(wx, wy) else {
                     return ball;
                 };
-                let ha = half_angle.to_radians();
-                let (k, r0) = (1.0 / ha.tan(), tip_r * ha.cos());
-                let c0 = tip_r * (1.0 - ha.sin()) - r0 * k;
+                let (k, r0, c0) = self.cone;
                 let g = |t: f64| a.z + d.z * t + c0 + k * self.rho(wx, wy, t);
                 let stretches = match self.within_unclamped(wx, wy, r0) {
                     Some((i0, i1)) => [(lo, i0.min(hi)), (i1.max(lo), hi)],
@@ -252,9 +265,9 @@ impl Sweep {
         }
     }
 
-    /// X range on row y of the band |n.(q - a)| <= r whose position along
-    /// the move lies in [-before, |d| + after] (mm).
-    pub fn strip_span(&self, y: f64, before: f64, after: f64) -> Option<(f64, f64)> {
+    /// X range on row y of the band |n.(q - a)| <= radius whose position
+    /// along the move lies in [-before, |d| + after] (mm).
+    pub fn strip_span(&self, y: f64, before: f64, after: f64, radius: f64) -> Option<(f64, f64)> {
         if self.axy <= 1e-18 {
             return None;
         }
@@ -271,26 +284,27 @@ impl Sweep {
             let (p, q) = ((lo - c) / k, (hi - c) / k);
             Some((p.min(q), p.max(q)))
         };
-        let (l1, h1) = lin(-uy, ux * wy, -self.r, self.r)?;
+        let (l1, h1) = lin(-uy, ux * wy, -radius, radius)?;
         let (l2, h2) = lin(ux, uy * wy, -before, len + after)?;
         let (l, h) = (l1.max(l2), h1.min(h2));
         (l <= h).then_some((l + self.a.x, h + self.a.x))
     }
 
-    /// X range on row y of the disc of radius r around the point at t.
-    pub fn disc_span(&self, y: f64, t: f64) -> Option<(f64, f64)> {
+    /// X range on row y of the disc of `radius` around the point at t.
+    pub fn disc_span(&self, y: f64, t: f64, radius: f64) -> Option<(f64, f64)> {
         let (cx, cy) = (self.a.x + t * self.d.x, self.a.y + t * self.d.y);
-        let h = self.r * self.r - (y - cy) * (y - cy);
+        let h = radius * radius - (y - cy) * (y - cy);
         (h >= 0.0).then(|| (cx - h.sqrt(), cx + h.sqrt()))
     }
 
     /// X range (mm) of the row y where the tool's XY footprint of this move
-    /// lies: the capsule of radius r around the move's XY projection.
-    pub fn row_span(&self, y: f64) -> Option<(f64, f64)> {
+    /// lies within `radius` (at most r) of the axis: the capsule of that
+    /// radius around the move's XY projection.
+    pub fn row_span(&self, y: f64, radius: f64) -> Option<(f64, f64)> {
         let parts = [
-            self.disc_span(y, 0.0),
-            self.disc_span(y, 1.0),
-            self.strip_span(y, 0.0, 0.0),
+            self.disc_span(y, 0.0, radius),
+            self.disc_span(y, 1.0, radius),
+            self.strip_span(y, 0.0, 0.0, radius),
         ];
         parts
             .into_iter()

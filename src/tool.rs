@@ -97,6 +97,37 @@ impl Tool {
         }
     }
 
+    /// How far from its axis the tool's cutting surface stays within `h`
+    /// of its tip (the farthest distance whose profile is at most h, a
+    /// hair more); None when h < 0, where it reaches nothing.
+    pub fn reach(&self, h: f64) -> Option<f64> {
+        if h < 0.0 {
+            return None;
+        }
+        let r = self.radius();
+        if self.profile(r) <= h {
+            return Some(r);
+        }
+        let rho = match *self {
+            Tool::Ball { d } => (h * (d - h)).max(0.0).sqrt(),
+            Tool::Flat { .. } => r,
+            Tool::VBit { angle, .. } => h * (angle.to_radians() / 2.0).tan(),
+            Tool::TaperBall {
+                tip_r, half_angle, ..
+            } => {
+                // the tip sphere up to r0, then the cone (`profile`)
+                let a = half_angle.to_radians();
+                let (r0, h0) = (tip_r * a.cos(), tip_r * (1.0 - a.sin()));
+                if h <= h0 {
+                    (h * (2.0 * tip_r - h)).max(0.0).sqrt()
+                } else {
+                    r0 + (h - h0) * a.tan()
+                }
+            }
+        };
+        Some((rho * (1.0 + 1e-9) + 1e-9).min(r))
+    }
+
     /// The profile at sqrt(d2) from the axis (infinite beyond the
     /// radius): for a ball one square root instead of two.
     #[inline]
@@ -281,6 +312,34 @@ impl Tool {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `reach` is the profile's inverse: a micron nearer the axis the
+    /// profile is at most h, a micron farther out above it (unless the
+    /// whole tool is within h); nothing below the tip.
+    #[test]
+    fn reach_inverts_the_profile() {
+        for s in [
+            "ball:3.175",
+            "flat:6",
+            "taperball:0.25:5:3.175",
+            "taperball:0.5:10",
+            "vbit:60:6.35",
+            "vbit:90:3",
+        ] {
+            let t = Tool::parse(s).unwrap();
+            assert_eq!(t.reach(-1e-9), None);
+            for k in 0..=400 {
+                let h = 0.05 * k as f64;
+                let rho = t.reach(h).unwrap();
+                if rho >= 1e-6 {
+                    assert!(t.profile(rho - 1e-6) <= h, "{s} h {h}: reach {rho} long");
+                }
+                if rho < t.radius() {
+                    assert!(t.profile(rho + 1e-6) > h, "{s} h {h}: reach {rho} short");
+                }
+            }
+        }
+    }
 
     #[test]
     fn specs_round_trip_and_profiles_are_continuous() {

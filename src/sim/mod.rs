@@ -295,7 +295,7 @@ fn ball_rows_body<const STATS: bool>(
             if t == 0.0 && continues {
                 continue;
             }
-            let Some((i0, i1)) = cells_in(stock, w, sw.disc_span(y, t)) else {
+            let Some((i0, i1)) = cells_in(stock, w, sw.disc_span(y, t, sw.r)) else {
                 continue;
             };
             let (cx, cy) = (sw.a.x + t * sw.d.x, sw.a.y + t * sw.d.y);
@@ -327,7 +327,7 @@ fn ball_rows_body<const STATS: bool>(
         if !side {
             continue;
         }
-        if let Some((i0, i1)) = cells_in(stock, w, sw.strip_span(y, before, after)) {
+        if let Some((i0, i1)) = cells_in(stock, w, sw.strip_span(y, before, after, sw.r)) {
             // the cylinder formula of `Sweep::cylinder`, in f32 relative to
             // the move's start and branch-free so that it vectorizes
             let wy = (y - sw.a.y) as f32;
@@ -457,6 +457,15 @@ fn cut_impl<const STATS: bool>(
             let mut stats = Vec::new();
             let ja = band * BAND;
             let jb = ja + rows.len() / w;
+            // cells only come down: nothing in a row stands higher than
+            // it does now, so a move reaches only where its tool's profile
+            // is lower than that (a tapered ball's or V's flank soon
+            // stands above all the stock)
+            let row_top: Vec<f64> = rows
+                .chunks(w)
+                .map(|r| r.iter().fold(floor, |m, &z| m.max(z)) as f64)
+                .collect();
+            let band_top = row_top.iter().fold(floor as f64, |m, &z| m.max(z));
             for &k in bin {
                 let seg = &segs[k as usize];
                 let sw = Sweep::new(seg.a, seg.b, tool);
@@ -470,11 +479,18 @@ fn cut_impl<const STATS: bool>(
                     }
                     continue;
                 }
+                let low = seg.a.z.min(seg.b.z);
+                if band_top < low {
+                    continue;
+                }
                 let (nx, ny) = engage::across(&sw);
                 let mut hit = false;
                 for j in ja..jb {
                     let (_, y) = stock.centre(0, j);
-                    let Some((i0, i1)) = cells_in(stock, w, sw.row_span(y)) else {
+                    let Some(reach) = tool.reach(row_top[j - ja] - low) else {
+                        continue;
+                    };
+                    let Some((i0, i1)) = cells_in(stock, w, sw.row_span(y, reach)) else {
                         continue;
                     };
                     let row = &mut rows[(j - ja) * w..(j - ja + 1) * w];

@@ -315,6 +315,7 @@ fn job_packet(j: &super::work::JobMade) -> Reply {
             "gouge_mm": rep.max_gouge_mm,
             "residual_mm": [rep.max_residual_mm, rep.mean_residual_mm],
             "between_cells_mm": rep.between_cells_mm,
+            "gouge_exact_per_move": rep.gouge_exact_per_move,
             "rapids_in_stock": rep.rapids_in_stock.len(),
             "out_of_travel": rep.out_of_travel.len(),
             "engagement": s.engagement.summary(),

@@ -96,10 +96,11 @@ impl Path {
         rise(t)
     }
 
-    /// Where the axis passes within r of vertex v: with rho^2 = alpha (t
-    /// - t0)^2 + rho0^2, the closest t0, r'^2 = r^2 - rho0^2, and the
-    /// stretch [lo, hi] of [0, 1] in reach (|t - t0| <= r' / sqrt(alpha));
-    /// a move with no XY travel is in reach all along or nowhere.
+    /// Where the axis passes within r of vertex v: with rho^2 = alpha
+    /// (t - t0)^2 + rho0^2, the closest t0, r'^2 = r^2 - rho0^2, and the
+    /// stretch [lo, hi] of [0, 1] in reach, where |t - t0| is at most
+    /// r' / sqrt(alpha). A move with no XY travel is in reach all along
+    /// or nowhere.
     fn in_reach(&self, r: f64, v: [f64; 3]) -> Option<(f64, f64, f64, f64)> {
         let (wx, wy) = (self.a.x - v[0], self.a.y - v[1]);
         let (dx, dy) = (self.d.x, self.d.y);

@@ -382,7 +382,7 @@ fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: b
     for j in j0..=j1 {
         let (_, y) = hf.centre(0, j);
         let Some((i0, i1)) = sw
-            .row_span(y)
+            .row_span(y, sw.r)
             .and_then(|(xl, xh)| slab.clip(xl, xh, y))
             .and_then(|(xl, xh)| cells_between(xl, xh, p, z.w))
         else {

@@ -182,7 +182,9 @@ function summary() {
   $('summary').innerHTML =
     `${h.lines.toLocaleString()} lines, estimated ${h.time}; cutting ${h.cut_m.toFixed(1)} m, rapids ${h.rapid_m.toFixed(1)} m; stepover ${h.stepover_mm.toFixed(3)} mm<br>` +
     `simulated gouge ${ok(h.gouge_mm <= 0.001, h.gouge_mm.toFixed(4) + ' mm')}, residual max ${h.residual_mm[0].toFixed(3)} / mean ${h.residual_mm[1].toFixed(4)} mm ` +
-    `(stock cells ${h.cell_mm.toFixed(3)} mm; a cut's bottom hides at most ${(h.between_cells_mm * 1000).toFixed(1)} µm between them); ` +
+    (h.gouge_exact_per_move
+      ? `(gouge exact along every move; residual on stock cells ${h.cell_mm.toFixed(3)} mm); `
+      : `(stock cells ${h.cell_mm.toFixed(3)} mm; a cut's bottom hides at most ${(h.between_cells_mm * 1000).toFixed(1)} µm between them); `) +
     `rapids through stock: ${ok(!h.rapids_in_stock, h.rapids_in_stock)}, out of travel: ${ok(!h.out_of_travel, h.out_of_travel)}<br>` +
     `${h.engagement}` + (h.notes.length ? '<br>' + h.notes.join('<br>') : '') +
     (h.moves_drawn < h.moves ? `<br>(drawing ${h.moves_drawn.toLocaleString()} of ${h.moves.toLocaleString()} moves)` : '');
