@@ -19,6 +19,40 @@ pub enum Tool {
     VBit { angle: f64, d: f64 },
 }
 
+/// Sine, cosine and tangent of an angle.
+#[derive(Clone, Copy)]
+struct Trig {
+    sin: f64,
+    cos: f64,
+    tan: f64,
+}
+
+/// `Trig` of `deg` degrees. A job asks a V's or tapered ball's profile
+/// millions of times with one angle (the trigonometry took a fifth of a
+/// tapered ball's toolpath), so each thread keeps the last answer.
+fn trig(deg: f64) -> Trig {
+    use std::cell::Cell;
+    thread_local! {
+        static LAST: Cell<(u64, Trig)> = const {
+            Cell::new((0, Trig { sin: 0.0, cos: 1.0, tan: 0.0 }))
+        };
+    }
+    LAST.with(|last| {
+        let (key, t) = last.get();
+        if key == deg.to_bits() {
+            return t;
+        }
+        let a = deg.to_radians();
+        let t = Trig {
+            sin: a.sin(),
+            cos: a.cos(),
+            tan: a.tan(),
+        };
+        last.set((deg.to_bits(), t));
+        t
+    })
+}
+
 /// Default cutting diameter of V-bits and tapered tools (1/4" shank).
 pub const DEFAULT_SHANK: f64 = 6.35;
 
@@ -82,16 +116,16 @@ impl Tool {
                 rr - (rr * rr - r * r).max(0.0).sqrt()
             }
             Tool::Flat { .. } => 0.0,
-            Tool::VBit { angle, .. } => r / (angle.to_radians() / 2.0).tan(),
+            Tool::VBit { angle, .. } => r / trig(angle / 2.0).tan,
             Tool::TaperBall {
                 tip_r, half_angle, ..
             } => {
-                let a = half_angle.to_radians();
-                let r0 = tip_r * a.cos();
+                let a = trig(half_angle);
+                let r0 = tip_r * a.cos;
                 if r <= r0 {
                     tip_r - (tip_r * tip_r - r * r).max(0.0).sqrt()
                 } else {
-                    tip_r * (1.0 - a.sin()) + (r - r0) / a.tan()
+                    tip_r * (1.0 - a.sin) + (r - r0) / a.tan
                 }
             }
         }
@@ -111,17 +145,17 @@ impl Tool {
         let rho = match *self {
             Tool::Ball { d } => (h * (d - h)).max(0.0).sqrt(),
             Tool::Flat { .. } => r,
-            Tool::VBit { angle, .. } => h * (angle.to_radians() / 2.0).tan(),
+            Tool::VBit { angle, .. } => h * trig(angle / 2.0).tan,
             Tool::TaperBall {
                 tip_r, half_angle, ..
             } => {
                 // the tip sphere up to r0, then the cone (`profile`)
-                let a = half_angle.to_radians();
-                let (r0, h0) = (tip_r * a.cos(), tip_r * (1.0 - a.sin()));
+                let a = trig(half_angle);
+                let (r0, h0) = (tip_r * a.cos, tip_r * (1.0 - a.sin));
                 if h <= h0 {
                     (h * (2.0 * tip_r - h)).max(0.0).sqrt()
                 } else {
-                    r0 + (h - h0) * a.tan()
+                    r0 + (h - h0) * a.tan
                 }
             }
         };
@@ -174,7 +208,7 @@ impl Tool {
                 }
             }
             Tool::VBit { angle, .. } => {
-                if g > 1.0 / (angle.to_radians() / 2.0).tan() {
+                if g > 1.0 / trig(angle / 2.0).tan {
                     r
                 } else {
                     0.0
@@ -183,7 +217,7 @@ impl Tool {
             Tool::TaperBall {
                 tip_r, half_angle, ..
             } => {
-                if g <= 1.0 / half_angle.to_radians().tan() {
+                if g <= 1.0 / trig(half_angle).tan {
                     tip_r * g / (1.0 + g * g).sqrt()
                 } else {
                     r
@@ -222,12 +256,12 @@ impl Tool {
                 [u, u]
             }
             Tool::VBit { angle, .. } => {
-                let u = cone(1.0 / (angle.to_radians() / 2.0).tan());
+                let u = cone(1.0 / trig(angle / 2.0).tan);
                 [u, u]
             }
             Tool::TaperBall {
                 tip_r, half_angle, ..
-            } => [sphere(tip_r), cone(1.0 / half_angle.to_radians().tan())],
+            } => [sphere(tip_r), cone(1.0 / trig(half_angle).tan)],
         }
     }
 
@@ -244,19 +278,19 @@ impl Tool {
         match *self {
             Tool::Ball { d } => sphere(d / 2.0, hi),
             Tool::Flat { .. } => 0.0,
-            Tool::VBit { angle, .. } => 1.0 / ((angle.to_radians() / 2.0).tan() * lo),
+            Tool::VBit { angle, .. } => 1.0 / (trig(angle / 2.0).tan * lo),
             Tool::TaperBall {
                 tip_r, half_angle, ..
             } => {
-                let a = half_angle.to_radians();
-                let r0 = tip_r * a.cos();
+                let a = trig(half_angle);
+                let r0 = tip_r * a.cos;
                 let s = if lo <= r0 {
                     sphere(tip_r, hi.min(r0))
                 } else {
                     0.0
                 };
                 let c = if hi >= r0 {
-                    1.0 / (a.tan() * lo.max(r0))
+                    1.0 / (a.tan * lo.max(r0))
                 } else {
                     0.0
                 };
