@@ -284,7 +284,7 @@ impl SimulateJob {
                 .map_err(|e| crate::Error(format!("{what}: {e}")))?;
             last_tool = Some(runs[runs.len() - 1].2);
             let g = t.time("gouge along moves", || {
-                sim::move_gouge(prog, &runs, &surface, panel_at)
+                sim::move_gouge(prog, &runs, &surface, panel_at, true)
             });
             // lines are numbered per file; a second file's follow on
             by_moves = by_moves.max(sim::MoveGouge {

@@ -18,7 +18,8 @@ pub struct Judged {
     /// Residual material over the relief: max and mean, mm.
     pub residual: (f64, f64),
     /// The deepest cut into the relief: at the cells, and exactly along
-    /// every ball's and flat's move (`sim::move_gouge`).
+    /// every flat's move (`sim::move_gouge`; a ball's were checked so as
+    /// they were made).
     pub gouge: f64,
     /// Per file: every segment's cut, and the tool stretches.
     moves: Vec<(Vec<MoveCut>, sim::ToolRuns)>,
@@ -38,13 +39,17 @@ pub fn run(
     let mut engagement = Engagement::default();
     let mut moves = Vec::new();
     let at = (plan.shift.x, plan.shift.y);
-    let surface = sim::surface_of(relief);
+    // (built only for a job with a flat end mill)
+    let mut surface = None;
     let mut along = 0.0f64;
     for prog in progs {
         let shifted = prog.lowered(z_shift);
         let (_, m, runs) = sim::cut_program_measured(&stock, &mut cut, &shifted, None)?;
         engagement.absorb(Engagement::measure(&shifted, &m, &runs, stock.pitch));
-        along = along.max(sim::move_gouge(&shifted, &runs, &surface, at).mm);
+        if runs.iter().any(|r| matches!(r.2, Tool::Flat { .. })) {
+            let surface = surface.get_or_insert_with(|| sim::surface_of(relief));
+            along = along.max(sim::move_gouge(&shifted, &runs, surface, at, false).mm);
+        }
         moves.push((m, runs));
     }
     let (at_cells, res, mean, _) = sim::deviation(&stock, &cut, relief, at);

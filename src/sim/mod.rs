@@ -458,14 +458,10 @@ fn cut_impl<const STATS: bool>(
             let ja = band * BAND;
             let jb = ja + rows.len() / w;
             // cells only come down: nothing in a row stands higher than
-            // it does now, so a move reaches only where its tool's profile
-            // is lower than that (a tapered ball's or V's flank soon
-            // stands above all the stock)
-            let row_top: Vec<f64> = rows
-                .chunks(w)
-                .map(|r| r.iter().fold(floor, |m, &z| m.max(z)) as f64)
-                .collect();
-            let band_top = row_top.iter().fold(floor as f64, |m, &z| m.max(z));
+            // it did when the band's first swept move came, so a move
+            // reaches only where its tool's profile is lower than that (a
+            // tapered ball's or V's flank soon stands above all the stock)
+            let mut tops: Option<(Vec<f64>, f64)> = None;
             for &k in bin {
                 let seg = &segs[k as usize];
                 let sw = Sweep::new(seg.a, seg.b, tool);
@@ -480,7 +476,15 @@ fn cut_impl<const STATS: bool>(
                     continue;
                 }
                 let low = seg.a.z.min(seg.b.z);
-                if band_top < low {
+                let (row_top, band_top) = tops.get_or_insert_with(|| {
+                    let r: Vec<f64> = rows
+                        .chunks(w)
+                        .map(|r| r.iter().fold(floor, |m, &z| m.max(z)) as f64)
+                        .collect();
+                    let top = r.iter().fold(floor as f64, |m, &z| m.max(z));
+                    (r, top)
+                });
+                if *band_top < low {
                     continue;
                 }
                 let (nx, ny) = engage::across(&sw);
@@ -727,7 +731,8 @@ pub struct MoveGouge {
     pub mm: f64,
     /// The line of the move that cuts deepest, if any cuts.
     pub line: Option<usize>,
-    /// Whether every tool was measured so (a V or tapered ball is not).
+    /// Whether every tool was measured so (a V or tapered ball is not, nor
+    /// a ball unless asked).
     pub every_tool: bool,
 }
 
@@ -752,11 +757,21 @@ pub fn surface_of(relief: &Relief) -> HeightField {
 }
 
 /// `MoveGouge` of `prog`'s runs against `hf`, the relief's surface with
-/// its lower-left corner at job X, Y `at` and its top at Z 0. A tool
-/// whose side only touches the surface does not cut it: the tool is taken
-/// a G-code unit (`GRID`) narrower, so a cut-out's slot, a radius outside
-/// the panel, does not read as cutting the panel's side wall.
-pub fn move_gouge(prog: &Program, runs: &ToolRuns, hf: &HeightField, at: (f64, f64)) -> MoveGouge {
+/// its lower-left corner at job X, Y `at` and its top at Z 0; a ball's
+/// moves only with `balls` (fine enough cells bound what a ball hides
+/// between them, and relievo's own jobs passed this very check when they
+/// were made, at a second or two for a 2048 px raster). A tool whose side
+/// only touches the surface does not cut it: the tool is taken a G-code
+/// unit (`GRID`) narrower, so a cut-out's slot, a radius outside the
+/// panel, does not read as cutting the panel's side wall. Rises under
+/// that unit are the G-code's rounding, and left out.
+pub fn move_gouge(
+    prog: &Program,
+    runs: &ToolRuns,
+    hf: &HeightField,
+    at: (f64, f64),
+    balls: bool,
+) -> MoveGouge {
     use crate::toolpath::along::Bottom;
     use crate::toolpath::path::GRID;
     let shift = DVec3::new(at.0, at.1, 0.0);
@@ -767,9 +782,9 @@ pub fn move_gouge(prog: &Program, runs: &ToolRuns, hf: &HeightField, at: (f64, f
     };
     for (from, to, tool) in runs {
         let bottom = match Bottom::of(tool) {
-            Some(Bottom::Ball(r)) => Bottom::Ball(r - GRID),
+            Some(Bottom::Ball(r)) if balls => Bottom::Ball(r - GRID),
             Some(Bottom::Flat(r)) => Bottom::Flat(r - GRID),
-            None => {
+            _ => {
                 out.every_tool = false;
                 continue;
             }
@@ -777,7 +792,7 @@ pub fn move_gouge(prog: &Program, runs: &ToolRuns, hf: &HeightField, at: (f64, f
         let worst = prog.segments[*from..*to]
             .par_iter()
             .filter_map(|s| {
-                hf.rise_along(bottom, s.a - shift, s.b - shift, 0.0)
+                hf.rise_along(bottom, s.a - shift, s.b - shift, GRID)
                     .map(|g| (g, s.line))
             })
             .reduce_with(|a, b| {
@@ -878,7 +893,7 @@ mod tests {
         let mut cut = Grid::new(w, h, 0.0f32);
         let (_, _, runs) = cut_program_measured(&stock, &mut cut, &prog, None).unwrap();
         let (at_cells, _, _, _) = deviation(&stock, &cut, &relief, (0.0, 0.0));
-        let along = move_gouge(&prog, &runs, &surface_of(&relief), (0.0, 0.0));
+        let along = move_gouge(&prog, &runs, &surface_of(&relief), (0.0, 0.0), true);
         assert!(at_cells < 1e-9, "cells {at_cells}");
         // (the tool taken a G-code unit narrower)
         let expected = 0.5 * (1.0 - 0.02 - crate::toolpath::path::GRID) - 0.1;
@@ -891,7 +906,7 @@ mod tests {
         )
         .unwrap();
         let runs = tool_runs(&ball, None).unwrap();
-        let none = move_gouge(&ball, &runs, &surface_of(&relief), (0.0, 0.0));
+        let none = move_gouge(&ball, &runs, &surface_of(&relief), (0.0, 0.0), true);
         assert_eq!((none.mm, none.line), (0.0, None));
     }
 
