@@ -789,11 +789,19 @@ pub fn move_gouge(
                 continue;
             }
         };
+        // the deepest found so far (f64 bits: ordered as the numbers are
+        // for positive ones) is the floor the next move must reach, which
+        // lets the branch and bound prune more (a tie still counts, so
+        // the first line of equals is named, whatever the threads' order)
+        let best = std::sync::atomic::AtomicU64::new(GRID.max(out.mm).to_bits());
         let worst = prog.segments[*from..*to]
             .par_iter()
             .filter_map(|s| {
-                hf.rise_along(bottom, s.a - shift, s.b - shift, GRID)
-                    .map(|g| (g, s.line))
+                let floor = f64::from_bits(best.load(std::sync::atomic::Ordering::Relaxed));
+                let floor = floor.next_down();
+                let g = hf.rise_along(bottom, s.a - shift, s.b - shift, floor)?;
+                best.fetch_max(g.to_bits(), std::sync::atomic::Ordering::Relaxed);
+                Some((g, s.line))
             })
             .reduce_with(|a, b| {
                 if b.0 > a.0 || (b.0 == a.0 && b.1 < a.1) {
