@@ -12,6 +12,7 @@ use crate::relief::{file, Relief};
 use crate::sim::{self, Report, Stock};
 use crate::timing::Timings;
 use crate::tool::Tool;
+use crate::toolpath::dropcutter::HeightField;
 use std::path::PathBuf;
 
 #[derive(Clone, Debug)]
@@ -249,11 +250,8 @@ impl SimulateJob {
             );
         }
         let mut cut = Grid::new(w, h, 0.0f32);
-        let surface = t.time("heightfield", || sim::surface_of(&relief));
-        let mut by_moves = sim::MoveGouge {
-            every_tool: true,
-            ..Default::default()
-        };
+        let surface = t.time("heightfield", || HeightField::of_relief(&relief));
+        let mut by_moves = sim::MoveGouge::NONE;
         let mut engagement = sim::Engagement::default();
         let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
         let mut time_by_tool: Vec<(String, f64)> = Vec::new();

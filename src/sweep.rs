@@ -65,34 +65,21 @@ pub struct Sweep {
     pub axy: f64,
     pub r: f64,
     pub tool: Tool,
-    /// A V's or tapered ball's cone: its slope k (rise per mm out), the
-    /// tapered ball's radius r0 where the tip sphere meets it, and its
-    /// height at the axis' line c0 (its rise is c0 + k rho past r0): the
-    /// trigonometry once per move, not per cell.
+    /// A V's or tapered ball's cone (`Tool::cone`), taken once per move,
+    /// not per cell.
     cone: (f64, f64, f64),
 }
 
 impl Sweep {
     pub fn new(a: DVec3, b: DVec3, tool: Tool) -> Sweep {
         let d = b - a;
-        let cone = match tool {
-            Tool::VBit { angle, .. } => (1.0 / (angle.to_radians() / 2.0).tan(), 0.0, 0.0),
-            Tool::TaperBall {
-                tip_r, half_angle, ..
-            } => {
-                let ha = half_angle.to_radians();
-                let (k, r0) = (1.0 / ha.tan(), tip_r * ha.cos());
-                (k, r0, tip_r * (1.0 - ha.sin()) - r0 * k)
-            }
-            _ => (0.0, 0.0, 0.0),
-        };
         Sweep {
             a,
             d,
             axy: d.x * d.x + d.y * d.y,
             r: tool.radius(),
             tool,
-            cone,
+            cone: tool.cone().unwrap_or_default(),
         }
     }
 

@@ -162,6 +162,23 @@ impl Tool {
         Some((rho * (1.0 + 1e-9) + 1e-9).min(r))
     }
 
+    /// A V's or tapered ball's cone: its slope k (rise per mm out), the
+    /// radius r0 where a tapered ball's tip sphere meets it, and c0, so
+    /// that past r0 the profile is c0 + k rho (None for a ball or flat).
+    pub fn cone(&self) -> Option<(f64, f64, f64)> {
+        match *self {
+            Tool::VBit { angle, .. } => Some((1.0 / trig(angle / 2.0).tan, 0.0, 0.0)),
+            Tool::TaperBall {
+                tip_r, half_angle, ..
+            } => {
+                let a = trig(half_angle);
+                let (k, r0) = (1.0 / a.tan, tip_r * a.cos);
+                Some((k, r0, tip_r * (1.0 - a.sin) - r0 * k))
+            }
+            _ => None,
+        }
+    }
+
     /// The profile at sqrt(d2) from the axis (infinite beyond the
     /// radius): for a ball one square root instead of two.
     #[inline]

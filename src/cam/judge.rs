@@ -9,6 +9,7 @@ use crate::grid::Grid;
 use crate::relief::Relief;
 use crate::sim::{self, Engagement, MoveCut, Over, Stock};
 use crate::tool::Tool;
+use crate::toolpath::dropcutter::HeightField;
 
 pub struct Judged {
     pub stock: Stock,
@@ -47,7 +48,7 @@ pub fn run(
         let (_, m, runs) = sim::cut_program_measured(&stock, &mut cut, &shifted, None)?;
         engagement.absorb(Engagement::measure(&shifted, &m, &runs, stock.pitch));
         if runs.iter().any(|r| matches!(r.2, Tool::Flat { .. })) {
-            let surface = surface.get_or_insert_with(|| sim::surface_of(relief));
+            let surface = surface.get_or_insert_with(|| HeightField::of_relief(relief));
             along = along.max(sim::move_gouge(&shifted, &runs, surface, at, false).mm);
         }
         moves.push((m, runs));

@@ -438,12 +438,7 @@ impl ToolpathJob {
         let plan = self
             .layout
             .plan(relief, &m, finish_settings.safe_z, self.origin)?;
-        let hf = t.time("heightfield", || {
-            HeightField::new(
-                relief.heights.map(|v| *v as f64 - relief.depth_mm),
-                relief.pitch_mm(),
-            )
-        });
+        let hf = t.time("heightfield", || HeightField::of_relief(relief));
         let floor = -relief.depth_mm;
         let (pw, ph) = (relief.width_mm, relief.height_mm);
         let panel = [0.0, 0.0, pw, ph];

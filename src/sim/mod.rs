@@ -725,7 +725,7 @@ pub fn deviation(
 /// (`HeightField::rise_along`, the check the toolpath itself passes):
 /// what stock cells alone can miss between their centres, where a flat's
 /// rim meets the surface.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct MoveGouge {
     /// How deep (mm; 0 when none).
     pub mm: f64,
@@ -737,6 +737,13 @@ pub struct MoveGouge {
 }
 
 impl MoveGouge {
+    /// No move measured yet: none cuts, and every tool so far was exact.
+    pub const NONE: MoveGouge = MoveGouge {
+        mm: 0.0,
+        line: None,
+        every_tool: true,
+    };
+
     /// Both measures of one job or a series of jobs.
     pub fn max(self, o: MoveGouge) -> MoveGouge {
         let deeper = if o.mm > self.mm { o } else { self };
@@ -745,15 +752,6 @@ impl MoveGouge {
             ..deeper
         }
     }
-}
-
-/// The relief's continuous surface as the drop-cutter sees it: its top
-/// at Z 0, its lower-left corner at X, Y 0.
-pub fn surface_of(relief: &Relief) -> HeightField {
-    HeightField::new(
-        relief.heights.map(|v| *v as f64 - relief.depth_mm),
-        relief.pitch_mm(),
-    )
 }
 
 /// `MoveGouge` of `prog`'s runs against `hf`, the relief's surface with
@@ -775,11 +773,7 @@ pub fn move_gouge(
     use crate::toolpath::along::Bottom;
     use crate::toolpath::path::GRID;
     let shift = DVec3::new(at.0, at.1, 0.0);
-    let mut out = MoveGouge {
-        mm: 0.0,
-        line: None,
-        every_tool: true,
-    };
+    let mut out = MoveGouge::NONE;
     for (from, to, tool) in runs {
         let bottom = match Bottom::of(tool) {
             Some(Bottom::Ball(r)) if balls => Bottom::Ball(r - GRID),
@@ -901,7 +895,8 @@ mod tests {
         let mut cut = Grid::new(w, h, 0.0f32);
         let (_, _, runs) = cut_program_measured(&stock, &mut cut, &prog, None).unwrap();
         let (at_cells, _, _, _) = deviation(&stock, &cut, &relief, (0.0, 0.0));
-        let along = move_gouge(&prog, &runs, &surface_of(&relief), (0.0, 0.0), true);
+        let surface = HeightField::of_relief(&relief);
+        let along = move_gouge(&prog, &runs, &surface, (0.0, 0.0), true);
         assert!(at_cells < 1e-9, "cells {at_cells}");
         // (the tool taken a G-code unit narrower)
         let expected = 0.5 * (1.0 - 0.02 - crate::toolpath::path::GRID) - 0.1;
@@ -914,7 +909,7 @@ mod tests {
         )
         .unwrap();
         let runs = tool_runs(&ball, None).unwrap();
-        let none = move_gouge(&ball, &runs, &surface_of(&relief), (0.0, 0.0), true);
+        let none = move_gouge(&ball, &runs, &surface, (0.0, 0.0), true);
         assert_eq!((none.mm, none.line), (0.0, None));
     }
 

@@ -185,6 +185,24 @@ impl Path {
         best
     }
 
+    /// The rise over the path at vertex v of a ball (`vertex`) or a flat
+    /// (`flat_vertex`).
+    pub fn vertex_by(&self, bottom: Bottom, v: [f64; 3]) -> f64 {
+        match bottom {
+            Bottom::Ball(r) => self.vertex(r, v),
+            Bottom::Flat(r) => self.flat_vertex(r, v),
+        }
+    }
+
+    /// The rise over the path at the edge p -> q of a ball (`edge`) or a
+    /// flat (`flat_edge`).
+    pub fn edge_by(&self, bottom: Bottom, p: [f64; 3], q: [f64; 3]) -> f64 {
+        match bottom {
+            Bottom::Ball(r) => self.edge(r, p, q),
+            Bottom::Flat(r) => self.flat_edge(r, p, q),
+        }
+    }
+
     /// A flat's rise over the path at vertex v: the tip is held at v.z
     /// while the axis is within r of v, so the rise is linear there and
     /// highest at an end of that stretch.

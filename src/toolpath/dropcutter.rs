@@ -54,6 +54,16 @@ pub const ROW_BLOCK: usize = 16;
 pub type Stack = Vec<(f64, usize, usize, usize)>;
 
 impl HeightField {
+    /// A relief's continuous surface as the tools meet it: its top at Z
+    /// 0, its lower-left corner at X, Y 0 (the toolpath's frame, and the
+    /// simulator's once the job's panel offset is taken off).
+    pub fn of_relief(relief: &crate::relief::Relief) -> HeightField {
+        HeightField::new(
+            relief.heights.map(|v| *v as f64 - relief.depth_mm),
+            relief.pitch_mm(),
+        )
+    }
+
     pub fn new(z: Grid<f64>, pitch: f64) -> HeightField {
         let lattice = Lattice::square(z.w, z.h, pitch);
         let top = lattice.height;
@@ -609,11 +619,7 @@ impl HeightField {
             if level == 0 {
                 let (d2, low, _) = near(0, bx, by);
                 let high = *self.levels[0].get(bx, by);
-                let cell = (d2, low, high);
-                best = best.max(match bottom {
-                    Bottom::Ball(r) => self.cell_rise(&path, r, bx, by, cell, best),
-                    Bottom::Flat(r) => self.flat_cell_rise(&path, r, bx, by, cell, best),
-                });
+                best = best.max(self.cell_rise(&path, bottom, bx, by, (d2, low, high), best));
                 continue;
             }
             let child = &self.levels[level - 1];
@@ -647,21 +653,23 @@ impl HeightField {
         (best > floor).then_some(best)
     }
 
-    /// The highest rise over `path` of a ball held by cell (i, j): its
-    /// four vertices, then, unless they settle that the cell cannot beat
-    /// `best`, its five edges and two facets. `(d2, low, high)`: the
+    /// The highest rise over `path` of a ball or flat held by cell (i, j):
+    /// its four vertices, then, unless they settle that the cell cannot
+    /// beat `best`, its five edges and two facets. `(d2, low, high)`: the
     /// cell's squared distance from the path, the path's lowest tip in
     /// reach of it, and its highest corner.
     ///
-    /// While every corner lies within F = R / 2 of the axis, a triangle
-    /// holds the ball at most the Jensen gap of its profile, curvature
-    /// R^2 / (R^2 - F^2)^1.5 times diameter^2 / 8, above its best corner;
-    /// while one lies farther, the whole cell lies at least F - diameter
-    /// from the axis, where the ball is that much higher.
+    /// A flat: no point of the cell holds the tip above the cell's highest
+    /// corner. A ball: while every corner lies within F = R / 2 of the
+    /// axis, a triangle holds the ball at most the Jensen gap of its
+    /// profile, curvature R^2 / (R^2 - F^2)^1.5 times diameter^2 / 8,
+    /// above its best corner; while one lies farther, the whole cell lies
+    /// at least F - diameter from the axis, where the ball is that much
+    /// higher.
     fn cell_rise(
         &self,
         path: &super::along::Path,
-        r: f64,
+        bottom: Bottom,
         i: usize,
         j: usize,
         (d2, low, high): (f64, f64, f64),
@@ -671,22 +679,28 @@ impl HeightField {
         let (cw, ch) = (d[0] - a[0], a[1] - d[1]);
         let corners = [a, b, c, d]
             .iter()
-            .map(|v| path.vertex(r, *v))
+            .map(|v| path.vertex_by(bottom, *v))
             .fold(f64::NEG_INFINITY, f64::max);
-        let diam2 = cw * cw + ch * ch;
-        let f = 0.5 * r;
-        let gap = r * r / (r * r - f * f).powf(1.5) * diam2 / 8.0;
-        let rim = (f - diam2.sqrt()).max(d2.sqrt()).min(r);
-        let rim_bound = high - (r - (r * r - rim * rim).sqrt()) - low;
-        if (corners + gap).max(rim_bound) <= best {
+        // the most an edge or facet can rise
+        let most = match bottom {
+            Bottom::Ball(r) => {
+                let diam2 = cw * cw + ch * ch;
+                let f = 0.5 * r;
+                let gap = r * r / (r * r - f * f).powf(1.5) * diam2 / 8.0;
+                let rim = (f - diam2.sqrt()).max(d2.sqrt()).min(r);
+                (corners + gap).max(high - (r - (r * r - rim * rim).sqrt()) - low)
+            }
+            Bottom::Flat(_) => high - low,
+        };
+        if most <= best.max(corners) {
             return corners;
         }
         let mut best = corners;
         for (p, q) in [(a, b), (a, c), (b, c), (b, d), (c, d)] {
-            best = best.max(path.edge(r, p, q));
+            best = best.max(path.edge_by(bottom, p, q));
         }
         if cw > 0.0 && ch > 0.0 {
-            best = best.max(self.facets_rise(path, Bottom::Ball(r), i, j));
+            best = best.max(self.facets_rise(path, bottom, i, j));
         }
         best
     }
@@ -707,36 +721,6 @@ impl HeightField {
             [1.0 - u, 1.0 - v, u + v - 1.0]
         });
         upper.max(lower)
-    }
-
-    /// `cell_rise` for a flat of radius `r`: no point of the cell holds
-    /// the tip above the cell's highest corner, so unless that beats
-    /// `best` the corners settle it.
-    fn flat_cell_rise(
-        &self,
-        path: &super::along::Path,
-        r: f64,
-        i: usize,
-        j: usize,
-        (_, low, high): (f64, f64, f64),
-        best: f64,
-    ) -> f64 {
-        let [a, b, c, d] = self.corners(i, j);
-        let mut top = [a, b, c, d]
-            .iter()
-            .map(|v| path.flat_vertex(r, *v))
-            .fold(f64::NEG_INFINITY, f64::max);
-        if high - low <= best.max(top) {
-            return top;
-        }
-        for (p, q) in [(a, b), (a, c), (b, c), (b, d), (c, d)] {
-            top = top.max(path.flat_edge(r, p, q));
-        }
-        let (cw, ch) = (d[0] - a[0], a[1] - d[1]);
-        if cw > 0.0 && ch > 0.0 {
-            top = top.max(self.facets_rise(path, Bottom::Flat(r), i, j));
-        }
-        top
     }
 
     /// Every cell in turn, no pruning (checks the branch and bound).
