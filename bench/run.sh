@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# Relief benchmarks (release mode). Needs ../shared/models beside the
-# checkout; the numpy comparison needs python3 with numpy, scipy, pillow.
+# Relief benchmarks (release mode). MODELS_DIR (default fixtures/) holds the
+# models; the numpy comparison needs python3 with numpy, scipy, pillow.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --release -q
 R=target/release/relievo
-M=../shared/models
+M=${1:-fixtures}
 T=$(mktemp -d)
 trap 'rm -rf "$T"' EXIT
 wall() { /usr/bin/time -f "  wall %e s, peak RSS %M KB" "$@"; }

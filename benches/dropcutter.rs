@@ -1,6 +1,6 @@
 //! Drop-cutter benchmark: the CL points of a 10% stepover raster of a
 //! 3.175 mm ball over a 2048 px, 100 mm relief of the Stanford bunny.
-//! `cargo bench --bench dropcutter` (needs ../shared/models).
+//! `cargo bench --bench dropcutter` (the bunny from fixtures/).
 
 use rayon::prelude::*;
 use relievo::job::ReliefJob;
@@ -9,8 +9,8 @@ use relievo::toolpath::dropcutter::HeightField;
 use std::time::Instant;
 
 fn main() {
-    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/models/stanford-bunny.obj");
+    let model =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/stanford-bunny.obj");
     let dir = std::env::temp_dir().join("relievo-bench-dc");
     std::fs::create_dir_all(&dir).unwrap();
     let job = ReliefJob {

@@ -3,7 +3,7 @@
 //! change (the depth, one step) to the new relief drawn, and from a new
 //! view angle (the yaw, one degree) to its relief drawn, as the page
 //! measures them (input event to the frame after the draw).
-//! `cargo bench --bench studio` (needs ../shared/models and Chromium).
+//! `cargo bench --bench studio` (the bunny from fixtures/ and Chromium).
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -49,7 +49,7 @@ fn main() {
     let Some(b) = Browser::start(&dir) else {
         return;
     };
-    let bunny = common::shared_model("stanford-bunny.obj");
+    let bunny = common::fixture("stanford-bunny.obj");
     let studio = Studio::start(&[&bunny]);
     b.goto(&studio.url);
     let at = |px: &str| {

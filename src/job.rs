@@ -2,9 +2,10 @@
 //! The binary only parses flags into `ReliefJob` and prints the summary.
 
 use crate::bail;
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::grid::Grid;
 use crate::output::{check_writable, Outputs};
+use crate::progress::Progress;
 use crate::relief::gradient::{shape_field, Field, Shaping};
 use crate::relief::panel::{Fade, Tilt};
 use crate::relief::{self, file, Background, Method, Params, Relief, Stencil};
@@ -214,7 +215,7 @@ impl ReliefJob {
     /// Load the model (or take `mesh`, already loaded from it) and look at
     /// it: the slow part of a relief, which no relief setting but the
     /// camera, the resolution, the up axis and `--smooth` changes.
-    pub fn see(&self, mesh: Option<&Mesh>, t: &mut Timings) -> Result<Sight> {
+    pub fn see(&self, mesh: Option<&Mesh>, t: &mut Timings, progress: &Progress) -> Result<Sight> {
         if self.model_is("png") {
             let path = self.model.as_ref().unwrap();
             let img = t.time("load", || load_png(path))?;
@@ -253,7 +254,9 @@ impl ReliefJob {
                 2,
                 pixel_limit(),
                 self.smooth,
+                &|done| progress.share(done),
             )
+            .map_err(|e| Error(format!("{}: {e}", self.model_name())))
         })?;
         if dm.id.data.iter().all(|&i| i == 0) {
             bail!("{}: nothing visible from this view", self.model_name());
@@ -400,15 +403,15 @@ impl ReliefJob {
     }
 
     /// Run the whole job and write its outputs (all or nothing).
-    pub fn run(&self, stage: &mut dyn FnMut(&str)) -> Result<Summary> {
+    pub fn run(&self, progress: &Progress) -> Result<Summary> {
         let mut params = self.validate()?;
         let mut t = Timings::default();
-        stage("loading and rendering");
-        let sight = self.see(None, &mut t)?;
-        stage("integrating");
+        progress.stage("loading and rendering");
+        let sight = self.see(None, &mut t, progress)?;
+        progress.stage("integrating");
         let (relief, field, warnings) = self.relief(&sight, &mut params, &mut t)?;
         drop(sight);
-        stage("writing");
+        progress.stage("writing");
         let depth_png = self.depth_out.as_ref().map(|_| {
             t.time("encode", || {
                 let mut d = field

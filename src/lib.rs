@@ -11,8 +11,10 @@ pub mod job;
 pub mod materials;
 pub mod output;
 pub mod preview;
+pub mod progress;
 pub mod relief;
 pub mod scene;
+pub mod settings;
 pub mod timing;
 
 pub use error::{Error, Result};

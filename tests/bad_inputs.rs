@@ -400,7 +400,7 @@ fn a_million_triangle_stl_makes_a_relief() {
 #[test]
 fn carve_refuses_job_flags_before_the_relief() {
     let d = scratch("bad-carve");
-    let bunny = shared_model("stanford-bunny.obj");
+    let bunny = fixture("stanford-bunny.obj");
     let job = d.join("job.nc");
     for (args, names) in [
         (vec!["--tool", "ball:0"], "--tool ball:0"),

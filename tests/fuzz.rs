@@ -235,7 +235,15 @@ fn mesh_target(bytes: &[u8], stl: bool) {
         if m.validate("fuzz").is_ok() && m.triangles.len() < 5000 {
             // faceted, and smooth (the default: welding, vertex normals)
             for smooth in [None, Some(45.0)] {
-                let _ = scene::render(&m, &Camera::default(), 16, 2, (1 << 26, "allowed"), smooth);
+                let _ = scene::render(
+                    &m,
+                    &Camera::default(),
+                    16,
+                    2,
+                    (1 << 26, "allowed"),
+                    smooth,
+                    &|_| {},
+                );
             }
         }
     }

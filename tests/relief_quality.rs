@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{ok, read_png16, relief_params as params, run, scratch, shaped, shared_model};
+use common::{fixture, ok, read_png16, relief_params as params, run, scratch, shaped};
 use relievo::grid::Grid;
 use relievo::relief::build;
 use relievo::relief::gradient::Field;
@@ -24,7 +24,7 @@ fn relief_smooth(
     p: &Params,
     smooth: Option<f64>,
 ) -> (Grid<f32>, Field, Vec<String>) {
-    let m = mesh::load(Path::new(&shared_model(model))).unwrap();
+    let m = mesh::load(Path::new(&fixture(model))).unwrap();
     let field = shaped(&m, cam, res, p, smooth);
     let r = build(&field, p, &[], &mut Timings::default()).unwrap();
     (r.heights, field, m.objects)
@@ -126,7 +126,7 @@ fn cornell_walls_recede_and_carry_no_terraces() {
 #[test]
 fn a_z_up_model_stands_upright() {
     let d = scratch("upright");
-    let obj = shared_model("nefertiti.obj");
+    let obj = fixture("nefertiti.obj");
     let p = |n: &str| d.join(n).display().to_string();
     let relief = |args: &[&str], out: &str| {
         let mut a = vec!["relief", "--resolution", "96", "-o"];
@@ -224,7 +224,7 @@ fn fade_tilt_and_a_flat_warning() {
     eprintln!("tilt: rise {rise:.3} mm over {height_mm:.1} mm, off by at most {e:.6} mm");
     assert!(e <= 2.0 * q, "tilt off by {e} mm");
     // the Cornell box from +z shows only the back of its back wall
-    let cornell = shared_model("cornell_box.obj");
+    let cornell = fixture("cornell_box.obj");
     let (_, _, _, _, said) = relief(&[&cornell], "flat.png");
     assert!(said.contains("warning: the relief is flat"), "{said}");
     std::fs::remove_dir_all(d).unwrap();
@@ -551,7 +551,7 @@ fn the_relief_reads_like_the_scene_at_100_to_2() {
         let m = if model == "demo" {
             relievo::scene::demo::scene()
         } else {
-            mesh::load(Path::new(&shared_model(model))).unwrap()
+            mesh::load(Path::new(&fixture(model))).unwrap()
         };
         let mut p = params(None);
         p.depth_mm = 2.0;
@@ -699,7 +699,7 @@ fn outline_ends_leave_no_flares() {
 #[test]
 fn a_rising_free_background_is_said() {
     let d = scratch("background-rise");
-    let bunny = shared_model("stanford-bunny.obj");
+    let bunny = fixture("stanford-bunny.obj");
     let relief = |extra: &[&str], out: &str| {
         let o = d.join(out);
         let os = o.display().to_string();

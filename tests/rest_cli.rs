@@ -180,7 +180,7 @@ fn rest_finishes_the_demo() {
 
 #[test]
 fn rest_finishes_fandisk() {
-    rest_finishes("rest-fandisk", Some(&shared_model("fandisk.obj")), &[]);
+    rest_finishes("rest-fandisk", Some(&fixture("fandisk.obj")), &[]);
 }
 
 /// The fandisk and Suzanne have a background, held flat by default: it
@@ -190,7 +190,7 @@ fn rest_finishes_fandisk() {
 #[test]
 fn rest_finishes_on_a_free_background() {
     for (name, model) in [
-        ("rest-fandisk-free", shared_model("fandisk.obj")),
+        ("rest-fandisk-free", fixture("fandisk.obj")),
         ("rest-suzanne-free", fixture("suzanne.stl")),
     ] {
         rest_finishes(name, Some(&model), &["--free-background"]);

@@ -956,7 +956,7 @@ fn the_armadillo_svg_opens_and_its_rapids_are_short() {
     let svg = d.join("job.svg");
     let out = run(&[
         "carve",
-        &shared_model("armadillo.obj"),
+        &fixture("armadillo.obj"),
         "--resolution",
         "400",
         "--finish",
@@ -1016,7 +1016,7 @@ fn the_armadillo_svg_opens_and_its_rapids_are_short() {
 #[test]
 fn refusals_advise_for_the_operation_that_cuts_too_deep() {
     let d = scratch("safe-advice");
-    let model = shared_model("cornell_box.obj");
+    let model = fixture("cornell_box.obj");
     let job = d.join("job.nc");
     let base = [
         "carve",

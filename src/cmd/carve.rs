@@ -5,6 +5,12 @@ use super::toolpath::{report, CutOpts};
 use clap::Args;
 use std::path::PathBuf;
 
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo carve                                         # the demo scene -> job.nc and its relief
+  relievo carve bunny.obj --width 80 --depth 4 --machine shapeoko -o bunny.nc
+  relievo carve coin.stl --up z --tool vbit:60 --finish raster+waterline";
+
 #[derive(Args)]
 pub struct CarveArgs {
     /// Model as for `relief`; without it, the demo scene.
@@ -38,7 +44,10 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     cam.check()?;
     // all or nothing, also when interrupted: no relief without its job
     relievo::output::interrupt::hold();
-    let r = super::with_spinner(quiet, "making the relief", || rjob.run(&mut |_| {}))?;
+    let progress = relievo::progress::Progress::on_terminal(quiet);
+    let r = rjob.run(&progress);
+    progress.finish();
+    let r = r?;
     super::relief::say_notes(&rjob, &r, quiet);
     let s = match super::with_spinner(quiet, "planning and checking the job", || {
         cam.run(&r.relief)

@@ -3,6 +3,11 @@
 use clap::Args;
 use std::path::PathBuf;
 
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo grbl-sim --link sim-port &                    # a simulated GRBL at ./sim-port
+  relievo grbl-sim --machine shapeoko --speed 20 --plate 10";
+
 #[derive(Args)]
 pub struct GrblSimArgs {
     /// Machine profile for travel, rates and buffer size.
@@ -44,6 +49,10 @@ pub struct GrblSimArgs {
     /// off.
     #[arg(long, value_name = "L1,L2,...", value_delimiter = ',')]
     pub tool_lengths: Vec<f64>,
+    /// Also reach the machine at this path (a symbolic link to its
+    /// pseudo-terminal), a name that stays the same from run to run.
+    #[arg(long, value_name = "PATH")]
+    pub link: Option<PathBuf>,
 }
 
 pub fn parse_fault(
@@ -92,6 +101,9 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
     // the host's side is closed here, so that the master sees when the
     // host closes the port (reads fail with EIO) and opens it again
     drop(slave);
+    if let Some(link) = &args.link {
+        make_link(link, &name)?;
+    }
     println!("{name}");
     std::io::stdout().flush().ok();
     let mut log = match &args.log {
@@ -164,6 +176,21 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
             );
         }
     }
+}
+
+/// A symbolic link at `link` to the pseudo-terminal `pty`; an old link
+/// there is replaced, anything else is left alone.
+fn make_link(link: &std::path::Path, pty: &str) -> relievo::Result<()> {
+    let what = |e: std::io::Error| relievo::Error(format!("--link {}: {e}", link.display()));
+    match std::fs::symlink_metadata(link) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::remove_file(link).map_err(what)?,
+        Ok(_) => relievo::bail!(
+            "--link {}: a file is there; give a new path",
+            link.display()
+        ),
+        Err(_) => {}
+    }
+    std::os::unix::fs::symlink(pty, link).map_err(what)
 }
 
 /// Whether the host side of the pseudo-terminal is open: the master

@@ -2,6 +2,12 @@
 
 use clap::Args;
 
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo machine status --port /dev/ttyUSB0
+  relievo machine jog --port /dev/ttyUSB0 --x 10 --feed 800
+  relievo machine zero --port /dev/ttyUSB0 --axes z";
+
 #[derive(Args)]
 pub struct MachineArgs {
     #[arg(value_enum)]

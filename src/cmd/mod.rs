@@ -2,6 +2,8 @@
 //! option structs, one library call, a summary printed.
 
 pub mod carve;
+pub mod completions;
+pub mod config;
 pub mod grbl_sim;
 pub mod machine;
 pub mod relief;
@@ -9,8 +11,6 @@ pub mod send;
 pub mod simulate;
 pub mod studio;
 pub mod toolpath;
-
-use std::io::IsTerminal;
 
 /// `N` sizes in mm written `AxB[xC]`, each within 0.001..10000 mm (up to
 /// 10 m: a panel, not a number that overflows the stock grid).
@@ -49,30 +49,13 @@ pub fn parse_pair(s: &str) -> Result<(f64, f64), String> {
     }
 }
 
-/// A spinner on a terminal, nothing in pipes or with --quiet.
-pub fn spinner(quiet: bool) -> Option<indicatif::ProgressBar> {
-    if quiet || !std::io::stderr().is_terminal() {
-        return None;
-    }
-    let pb = indicatif::ProgressBar::new_spinner();
-    if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})") {
-        pb.set_style(style);
-    }
-    pb.enable_steady_tick(std::time::Duration::from_millis(100));
-    Some(pb)
-}
-
 /// Run `work` under a spinner saying `what` (a long toolpath shows that it
 /// is alive and for how long).
 pub fn with_spinner<T>(quiet: bool, what: &str, work: impl FnOnce() -> T) -> T {
-    let pb = spinner(quiet);
-    if let Some(pb) = &pb {
-        pb.set_message(what.to_string());
-    }
+    let progress = relievo::progress::Progress::on_terminal(quiet);
+    progress.stage(what);
     let out = work();
-    if let Some(pb) = pb {
-        pb.finish_and_clear();
-    }
+    progress.finish();
     out
 }
 

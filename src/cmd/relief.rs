@@ -1,12 +1,19 @@
 //! `relievo relief`: a model (or the demo scene) to a relief file; the
 //! relief flags it shares with `carve`.
 
-use super::{print_timings, spinner};
+use super::print_timings;
 use clap::Args;
 use relievo::job::ReliefJob;
+use relievo::progress::Progress;
 use relievo::relief::{Background, Method};
 use relievo::scene::{Camera, Up, View};
 use std::path::PathBuf;
+
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo relief                                        # the built-in demo scene -> relief.png
+  relievo relief bunny.obj --view left --depth 4 --width 120 -o bunny.png
+  relievo relief bust.stl --up z --material oak --preview bust-look.png";
 
 #[derive(Args)]
 pub struct ReliefArgs {
@@ -203,16 +210,9 @@ impl ReliefOpts {
 pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     let mut job = args.opts.job(args.model, args.output);
     job.preview = args.preview;
-    let pb = spinner(quiet);
-    let mut stage = |s: &str| {
-        if let Some(pb) = &pb {
-            pb.set_message(s.to_string());
-        }
-    };
-    let res = job.run(&mut stage);
-    if let Some(pb) = pb {
-        pb.finish_and_clear();
-    }
+    let progress = Progress::on_terminal(quiet);
+    let res = job.run(&progress);
+    progress.finish();
     let s = res?;
     say_notes(&job, &s, quiet);
     if !quiet {

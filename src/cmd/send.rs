@@ -3,6 +3,12 @@
 use clap::Args;
 use std::path::PathBuf;
 
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo send --port /dev/ttyUSB0 job.nc               # stream the job (asks at each tool change)
+  relievo send --port COM3 --check job.nc               # GRBL's check mode first, then the cut
+  relievo send --port /dev/ttyUSB0 --resume job.nc.journal job.nc";
+
 #[derive(Args)]
 pub struct SendArgs {
     /// G-code job.

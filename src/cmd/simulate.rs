@@ -1,8 +1,13 @@
 //! `relievo simulate`: judge any G-code job against a relief.
 
-use super::{parse_pair, parse_stock, print_timings, spinner};
+use super::{parse_pair, parse_stock, print_timings, with_spinner};
 use clap::Args;
 use std::path::PathBuf;
+
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo simulate job.nc --relief job-relief.png       # judge a job against its relief
+  relievo simulate other.nc --relief r.png --tool ball:3 --stock 100x80x8 -o cut.png";
 
 #[derive(Args)]
 pub struct SimulateArgs {
@@ -66,15 +71,7 @@ pub fn run(args: SimulateArgs, quiet: bool, verbose: bool) -> relievo::Result<()
         report: args.report,
         deviation: args.deviation,
     };
-    let pb = spinner(quiet);
-    if let Some(pb) = &pb {
-        pb.set_message("simulating");
-    }
-    let res = job.run();
-    if let Some(pb) = pb {
-        pb.finish_and_clear();
-    }
-    let s = res?;
+    let s = with_spinner(quiet, "simulating", || job.run())?;
     if !quiet {
         eprintln!(
             "simulated {} on {} x {} cells{}\n{}",

@@ -4,6 +4,11 @@ use clap::Args;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::path::PathBuf;
 
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo studio --open                                 # the demo scene, in the browser
+  relievo studio bunny.obj --port 8080";
+
 #[derive(Args)]
 pub struct StudioArgs {
     /// Model to open (OBJ, STL or PNG); without it, the demo scene.

@@ -5,6 +5,12 @@ use super::{parse_pair, parse_size, parse_stock, print_timings, with_spinner};
 use clap::Args;
 use std::path::PathBuf;
 
+/// What `--help` ends with.
+pub const EXAMPLES: &str = "Examples:
+  relievo toolpath relief.png -o job.nc                 # roughing + raster finish, GRBL
+  relievo toolpath relief.png --tool ball:1 --finish raster+waterline --machine 3018
+  relievo toolpath relief.png --material oak --stock 120x90x12 --svg job.svg";
+
 #[derive(Args)]
 pub struct ToolpathArgs {
     /// Relief PNG (its JSON sidecar gives the size).

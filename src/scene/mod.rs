@@ -19,7 +19,8 @@ use crate::error::Result;
 /// smooth vertex normals.
 /// A relief of more than `max_pixels` is refused before any memory is
 /// taken for it (the 16384 px demo, 159 million pixels, took 10 GB), the
-/// error saying `why` the limit is what it is.
+/// error saying `why` the limit is what it is. `progress` is told the share
+/// of the picture drawn.
 pub fn render(
     mesh: &Mesh,
     cam: &Camera,
@@ -27,6 +28,7 @@ pub fn render(
     supersample: usize,
     (max_pixels, why): (usize, &str),
     smooth: Option<f64>,
+    progress: &(dyn Fn(f64) + Sync),
 ) -> Result<DepthMap> {
     let pos: Vec<glam::DVec3> = mesh.positions.iter().map(|p| p.as_dvec3()).collect();
     let pr = cam.project(&pos, long_px, supersample);
@@ -49,14 +51,26 @@ pub fn render(
     }
     let ids: Vec<u16> = mesh.tri_object.iter().map(|o| o + 1).collect();
     let slopes = smooth.map(|angle| corner_slopes(mesh, &pos, &pr, angle));
-    let (h, id, surfaces) = raster::rasterize(
+    let r = raster::rasterize(
         &pr.points,
         &mesh.triangles,
         &ids,
         slopes.as_deref(),
-        pr.w,
-        pr.h,
-    );
+        (pr.w, pr.h),
+        (progress, raster::MAX_PIXEL_TESTS),
+    )
+    .map_err(|deep| {
+        crate::error::Error(format!(
+            "{:.2} million triangles, many of them large and stacked deep behind each \
+             other, would take more than {} billion pixel tests to draw at {} x {} px; \
+             decimate the mesh or lower --resolution",
+            deep.triangles as f64 / 1e6,
+            raster::MAX_PIXEL_TESTS / 1_000_000_000,
+            pr.w,
+            pr.h
+        ))
+    });
+    let (h, id, surfaces) = r?;
     Ok(DepthMap {
         h,
         id,

@@ -285,7 +285,11 @@ impl Studio {
         let (sight, shaped) = match cached {
             Some(c) => c,
             None => {
-                let sight = Arc::new(job.see(model.mesh.as_deref(), &mut t)?);
+                let sight = Arc::new(job.see(
+                    model.mesh.as_deref(),
+                    &mut t,
+                    &crate::progress::Progress::none(),
+                )?);
                 (sight, None)
             }
         };

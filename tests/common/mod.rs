@@ -16,26 +16,13 @@ pub fn run(args: &[&str]) -> Output {
     bin().args(args).output().expect("relievo runs")
 }
 
+/// A file in fixtures/ (the models, with their sources in SOURCES.md).
 pub fn fixture(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("fixtures")
         .join(name)
         .display()
         .to_string()
-}
-
-/// A model from ../shared/models (beside the repository; too large to
-/// keep among the fixtures).
-pub fn shared_model(name: &str) -> String {
-    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/models")
-        .join(name);
-    assert!(
-        p.exists(),
-        "{}: the shared models are not beside the repository",
-        p.display()
-    );
-    p.display().to_string()
 }
 
 /// A fresh scratch directory for one test.
@@ -166,7 +153,8 @@ pub fn shaped(
     p: &relievo::relief::Params,
     smooth: Option<f64>,
 ) -> relievo::relief::gradient::Field {
-    let dm = relievo::scene::render(mesh, &cam, res, 2, (1 << 26, "allowed"), smooth).unwrap();
+    let dm =
+        relievo::scene::render(mesh, &cam, res, 2, (1 << 26, "allowed"), smooth, &|_| {}).unwrap();
     let shaping = relievo::relief::gradient::Shaping {
         alpha: p.alpha,
         threshold: p.silhouette,
