@@ -24,7 +24,10 @@ fn main() {
         output: dir.join("r.png"),
         ..Default::default()
     };
-    let relief = job.run(&mut |_| {}).expect("relief").relief;
+    let relief = job
+        .run(&relievo::progress::Progress::none())
+        .expect("relief")
+        .relief;
     let depth = relief.depth_mm;
     let z = relief.heights.map(|v| *v as f64 - depth);
     let t = Instant::now();

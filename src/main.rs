@@ -46,9 +46,9 @@ enum Cmd {
     #[command(after_help = send::EXAMPLES)]
     Send(send::SendArgs),
     /// List serial ports.
-    #[command(
-        after_help = "Examples:\n  relievo ports                # then: relievo config set port PORT"
-    )]
+    #[command(after_help = "Examples:
+  relievo ports                            # the serial ports this machine has
+  relievo config set port /dev/ttyUSB0     # remember which one is the mill's")]
     Ports,
     /// Ask a GRBL controller for its status, unlock it or home it.
     #[command(after_help = machine::EXAMPLES)]

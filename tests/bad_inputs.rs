@@ -427,3 +427,47 @@ fn carve_refuses_job_flags_before_the_relief() {
     }
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// A pile of random triangles, each a sizeable part of the picture (a
+/// broken export, a point cloud read as a mesh): the render costs what the
+/// picture shows, not triangles times their area, and gives a relief.
+/// 1.2 million such triangles at 512 px took over 120 s before; the
+/// figures are in docs/benchmarks.md, here only that it finishes.
+#[test]
+fn a_pile_of_random_triangles_makes_a_relief() {
+    let d = scratch("random-pile");
+    let stl = d.join("pile.stl");
+    let count = 200_000u32;
+    let mut seed = 7u64;
+    let mut rnd = || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let mut b = Vec::with_capacity(84 + 50 * count as usize);
+    b.extend([0u8; 80]);
+    b.extend(count.to_le_bytes());
+    for _ in 0..count {
+        b.extend([0u8; 12]);
+        for _ in 0..9 {
+            b.extend(rnd().to_le_bytes());
+        }
+        b.extend([0u8; 2]);
+    }
+    std::fs::write(&stl, &b).unwrap();
+    let out = d.join("r.png");
+    ok(&run(&[
+        "relief",
+        stl.to_str().unwrap(),
+        "--resolution",
+        "256",
+        "-o",
+        out.to_str().unwrap(),
+        "-q",
+    ]));
+    let (w, h, v) = read_png16(&out);
+    assert_eq!(w.max(h), 256);
+    assert!(v.iter().filter(|&&x| x > 0).count() > w * h / 2);
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -1,0 +1,199 @@
+//! relievo against the machine its users own: the real GRBL 1.1h firmware
+//! (see common/firmware.rs for where it comes from, and what happens
+//! when it is not at hand).
+
+mod common;
+
+use common::firmware::{firmware, OnPty};
+use common::*;
+use std::path::Path;
+use std::process::Command;
+
+/// GRBL's own parser's answer to each line of `job` (run in `dir`, where it
+/// keeps its EEPROM.DAT): how many it answered, and the ones it refused
+/// with their answers. An M0 would wait there for a cycle start that never
+/// comes, so its lines are left out (and not counted).
+fn refused(validate: &Path, dir: &Path, job: &Path) -> (usize, Vec<(usize, String)>) {
+    let text = std::fs::read_to_string(job).unwrap();
+    let kept: Vec<&str> = text.lines().filter(|l| l.trim() != "M0").collect();
+    let plain = dir.join("gvalidate-input.nc");
+    std::fs::write(&plain, kept.join("\n") + "\n").unwrap();
+    let out = Command::new("timeout")
+        .arg("60")
+        .arg(validate)
+        .arg(&plain)
+        .current_dir(dir)
+        .stdin(std::process::Stdio::null())
+        .output()
+        .expect("gvalidate.exe runs");
+    assert_ne!(
+        out.status.code(),
+        Some(124),
+        "gvalidate.exe hung on {}",
+        job.display()
+    );
+    let text = String::from_utf8_lossy(&out.stdout).replace('\r', "");
+    let answers: Vec<&str> = text
+        .lines()
+        .filter(|l| *l == "ok" || l.starts_with("error:"))
+        .collect();
+    let bad = answers
+        .iter()
+        .enumerate()
+        .filter(|(_, a)| **a != "ok")
+        .map(|(k, a)| (k + 1, a.to_string()))
+        .collect();
+    (answers.len(), bad)
+}
+
+/// Every line of relievo's jobs (roughing, tool changes, arcs, inches,
+/// V-bits, waterlines) is one GRBL 1.1h's own parser accepts.
+#[test]
+fn grbl_s_own_parser_accepts_every_line_relievo_writes() {
+    let Some(fw) = firmware("grbl_s_own_parser_accepts_every_line_relievo_writes") else {
+        return;
+    };
+    let d = scratch("fw-validate");
+    for (name, extra) in [
+        ("demo", vec![]),
+        ("inch", vec!["--units", "in"]),
+        (
+            "vbit",
+            vec!["--tool", "vbit:60", "--finish", "raster+waterline"],
+        ),
+        (
+            "spot",
+            vec!["--machine", "shapeoko", "--tool", "T2", "--rest", "ball:1"],
+        ),
+    ] {
+        let job = d.join(format!("{name}.nc"));
+        let mut args = vec![
+            "carve",
+            "-q",
+            "--resolution",
+            "96",
+            "-o",
+            job.to_str().unwrap(),
+        ];
+        let spot = fixture("spot.obj");
+        if name == "spot" {
+            args.insert(1, &spot);
+        }
+        args.extend(extra);
+        ok(&run(&args));
+        let text = std::fs::read_to_string(&job).unwrap();
+        let lines = text.lines().filter(|l| l.trim() != "M0").count();
+        let (answered, bad) = refused(&fw.validate, &d, &job);
+        eprintln!(
+            "{name}: GRBL's parser answered {answered} of {lines} lines, refused {}",
+            bad.len()
+        );
+        assert_eq!(
+            answered, lines,
+            "{name}: GRBL's parser did not answer every line"
+        );
+        assert!(bad.is_empty(), "{name}: GRBL refused {bad:?}");
+    }
+    // the check has teeth: a line GRBL refuses is named
+    let bad = d.join("bad.nc");
+    std::fs::write(&bad, "G21 G90\nG1 X10 F500\nG1 X20 Q7\n").unwrap();
+    assert_eq!(
+        refused(&fw.validate, &d, &bad).1,
+        [(3, "error:20".to_string())]
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}
+
+/// `relievo send` on the firmware over a serial line: a job checked in
+/// GRBL's check mode, one with a bad line refused at that line, and a
+/// small job run to its end with the machine idle where the job left it.
+#[test]
+fn send_streams_a_job_to_the_firmware() {
+    let Some(fw) = firmware("send_streams_a_job_to_the_firmware") else {
+        return;
+    };
+    let d = scratch("fw-send");
+    let relief = d.join("coin.png");
+    let coin = fixture("suzanne.stl");
+    ok(&run(&[
+        "relief",
+        &coin,
+        "--up",
+        "y",
+        "--width",
+        "6",
+        "--depth",
+        "0.3",
+        "--resolution",
+        "24",
+        "-q",
+        "-o",
+        relief.to_str().unwrap(),
+    ]));
+    let job = d.join("coin.nc");
+    ok(&run(&[
+        "toolpath",
+        relief.to_str().unwrap(),
+        "--tool",
+        "ball:3",
+        "--stepover",
+        "60%",
+        "--safe-z",
+        "1",
+        "-q",
+        "-o",
+        job.to_str().unwrap(),
+    ]));
+    let text = std::fs::read_to_string(&job).unwrap();
+    assert!(!text.contains("\nM0"), "the small job needs one tool");
+    let grbl = OnPty::start(fw, &d);
+    let tty = grbl.tty.to_str().unwrap().to_string();
+    let send = |args: &[&str]| {
+        let mut a = vec!["60", env!("CARGO_BIN_EXE_relievo"), "send", "--port", &tty];
+        a.extend_from_slice(args);
+        Command::new("timeout").args(&a).output().unwrap()
+    };
+    let out = send(&["--check-only", job.to_str().unwrap()]);
+    ok(&out);
+    let said =
+        String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(said.contains("check passed"), "{said}");
+
+    let bad = d.join("bad.nc");
+    std::fs::write(&bad, format!("{text}G1 X1 Q7\n")).unwrap();
+    let out = send(&["--check-only", bad.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let said = String::from_utf8_lossy(&out.stderr);
+    let n = text.lines().count() + 1;
+    assert!(
+        said.contains(&format!("line {n}")) && said.contains("error:20"),
+        "{said}"
+    );
+
+    let start = std::time::Instant::now();
+    let out = send(&["--on-pause", "continue", job.to_str().unwrap()]);
+    ok(&out);
+    eprintln!(
+        "the job ran on the firmware in {:.1} s",
+        start.elapsed().as_secs_f64()
+    );
+    let status = Command::new("timeout")
+        .args([
+            "20",
+            env!("CARGO_BIN_EXE_relievo"),
+            "machine",
+            "status",
+            "--port",
+            &tty,
+        ])
+        .output()
+        .unwrap();
+    ok(&status);
+    let said = String::from_utf8_lossy(&status.stdout);
+    assert!(said.starts_with("<Idle|"), "{said}");
+    // the firmware executed every motion block of the job
+    let blocks = std::fs::read_to_string(d.join("blocks.log")).unwrap_or_default();
+    assert!(blocks.lines().count() > 10, "{blocks}");
+    drop(grbl);
+    std::fs::remove_dir_all(d).unwrap();
+}
