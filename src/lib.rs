@@ -27,5 +27,7 @@ pub mod simulate;
 pub mod studio;
 pub mod surface;
 pub mod sweep;
+#[cfg(test)]
+mod testing;
 pub mod tool;
 pub mod toolpath;

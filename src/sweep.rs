@@ -310,13 +310,8 @@ mod tests {
     #[test]
     fn taper_ball_closed_form_matches_a_fine_search() {
         let tool = Tool::parse("taperball:0.3:10:2.5").unwrap();
-        let mut s = 12345u64;
-        let mut rnd = move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut unit = crate::testing::rng(12345);
+        let mut rnd = move || unit() - 0.5;
         let mut worst: f64 = 0.0;
         for _ in 0..300 {
             let a = DVec3::new(rnd(), rnd(), rnd());

@@ -105,7 +105,8 @@ fn grbl_s_own_parser_accepts_every_line_relievo_writes() {
 }
 
 /// `relievo send` on the firmware over a serial line: a job checked in
-/// GRBL's check mode, one with a bad line refused at that line, and a
+/// GRBL's check mode, one with a bad line refused at that line, one with
+/// a tool change checked to its end, and a
 /// small job run to its end with the machine idle where the job left it.
 #[test]
 fn send_streams_a_job_to_the_firmware() {
@@ -169,6 +170,22 @@ fn send_streams_a_job_to_the_firmware() {
         said.contains(&format!("line {n}")) && said.contains("error:20"),
         "{said}"
     );
+
+    // a job with a tool change checks to its end: GRBL's check mode does
+    // not pause at M0, and the sender does not wait for it to
+    let changes = d.join("changes.nc");
+    ok(&run(&[
+        "carve",
+        "-q",
+        "--resolution",
+        "32",
+        "-o",
+        changes.to_str().unwrap(),
+    ]));
+    assert!(std::fs::read_to_string(&changes).unwrap().contains("\nM0"));
+    let out = send(&["--check-only", changes.to_str().unwrap()]);
+    ok(&out);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("check passed"));
 
     let start = std::time::Instant::now();
     let out = send(&["--on-pause", "continue", job.to_str().unwrap()]);

@@ -551,6 +551,54 @@ fn an_m0_pause_holds_and_continues() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// Check mode runs a job with a tool change to its last line: GRBL's
+/// check mode answers the M0 and goes on, and so does the sender (it
+/// waited for a hold that never came). A bad line after the M0 is found;
+/// without it the check passes and nothing moves.
+#[test]
+fn check_mode_runs_through_a_tool_change() {
+    let d = scratch("send-check-m0");
+    let (path, _) = write_spiral(&d, 300, 0.1);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut with_pause = String::new();
+    for (k, l) in text.lines().enumerate() {
+        with_pause.push_str(l);
+        with_pause.push('\n');
+        if k == 100 {
+            with_pause.push_str("M5\nM0 (fit the 1 mm ball, zero Z)\nM3 S10000\n");
+        }
+    }
+    std::fs::write(&path, &with_pause).unwrap();
+    for check_only in [true, false] {
+        let mut p = port(Faults::default());
+        let j = SendJob {
+            check_only,
+            check: !check_only,
+            on_pause: sender::OnPause::Continue,
+            ..job(&path)
+        };
+        j.run(&mut p, &AtomicBool::new(false)).unwrap();
+        if check_only {
+            assert!(p.sim.log.is_empty(), "moved: {:?}", &p.sim.log[..3]);
+        }
+    }
+    let bad = d.join("bad.nc");
+    std::fs::write(&bad, format!("{with_pause}G1 X1 Q7\n")).unwrap();
+    let n = with_pause.lines().count() + 1;
+    let mut p = port(Faults::default());
+    let e = SendJob {
+        check_only: true,
+        ..job(&bad)
+    }
+    .run(&mut p, &AtomicBool::new(false))
+    .unwrap_err();
+    assert!(
+        e.0.contains(&format!("line {n}")) && e.0.contains("error:20"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// The job's `(tool: SPEC ...)` comments in order.
 fn tool_specs(text: &str) -> Vec<String> {
     text.lines()

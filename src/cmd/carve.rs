@@ -63,7 +63,8 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     };
     relievo::output::interrupt::keep_all();
     if !quiet {
-        eprintln!("relief -> {}", relief_path.display());
+        let written: Vec<String> = r.written.iter().map(|p| p.display().to_string()).collect();
+        eprintln!("relief -> {}", written.join(", "));
     }
     report(&s, quiet, verbose);
     Ok(())

@@ -587,7 +587,8 @@ pub fn stream(
             out.bytes += len;
             inflight.push_back((next, len));
             used += len;
-            if items[next].job.is_some_and(|k| lines[k].pause) {
+            // GRBL's check mode answers an M0 and goes on: no pause to wait for
+            if !check_mode && items[next].job.is_some_and(|k| lines[k].pause) {
                 gate = Some((next, false));
             }
             next += 1;

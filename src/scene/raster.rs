@@ -656,13 +656,7 @@ mod tests {
     #[test]
     fn a_deep_pile_draws_as_file_order_does() {
         let (w, h) = (70, 45);
-        let mut seed = 99u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::testing::rng(99);
         let mut pts = Vec::new();
         let mut tris = Vec::new();
         for k in 0..3000u32 {

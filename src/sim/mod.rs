@@ -1027,13 +1027,7 @@ mod tests {
     /// the full capsule evaluation on random polylines, steep ones too.
     #[test]
     fn ball_fast_path_equals_full_capsule() {
-        let mut seed = 99u64;
-        let mut rnd = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::testing::rng(99);
         let tool = Tool::Ball { d: 1.6 };
         for trial in 0..6 {
             let mut job = String::from("G0 X3 Y3 Z0.5\nG1 F500\n");

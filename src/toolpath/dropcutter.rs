@@ -933,15 +933,7 @@ fn edge(tool: &Tool, r: f64, x: f64, y: f64, a: [f64; 3], b: [f64; 3]) -> f64 {
 mod tests {
     use super::*;
 
-    fn rng(seed: u64) -> impl FnMut() -> f64 {
-        let mut s = seed;
-        move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        }
-    }
+    use crate::testing::rng;
 
     /// Smooth waves, noise, and a raised disc whose rim is a step one
     /// sample wide (an outline with `--steps`).

@@ -804,13 +804,7 @@ mod check_tests {
     #[test]
     fn the_sweep_behind_the_lower_end_finds_nothing_more() {
         let hf = field(96, 3);
-        let mut s = 99u64;
-        let mut rnd = move || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::testing::rng(99);
         let mut cutting = 0;
         for spec in ["ball:1", "flat:0.8", "vbit:90:1.2"] {
             let tool = Tool::parse(spec).unwrap();

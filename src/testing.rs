@@ -1,0 +1,13 @@
+//! Helpers for the unit tests.
+
+/// A small deterministic generator of numbers in [0, 1) (a 64-bit LCG's
+/// top 53 bits): the same random cases on every run and machine.
+pub fn rng(seed: u64) -> impl FnMut() -> f64 {
+    let mut s = seed;
+    move || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
