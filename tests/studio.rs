@@ -281,3 +281,49 @@ fn bad_uploads_and_requests_leave_the_studio_serving() {
         .unwrap();
     assert_eq!(r.status().as_u16(), 200);
 }
+
+/// The studio answers only this machine's own pages: a request naming
+/// another host (a DNS name pointed at 127.0.0.1 by another site, DNS
+/// rebinding) or posted from another site's page is refused with 403 and
+/// changes nothing; the page's own requests go through.
+#[test]
+fn another_site_cannot_use_the_studio() {
+    use std::io::{Read, Write};
+    let studio = Studio::start(&[]);
+    let authority = studio
+        .url
+        .trim_start_matches("http://")
+        .trim_end_matches('/')
+        .to_string();
+    let port = authority.rsplit_once(':').unwrap().1.to_string();
+    let ask = |method: &str, path: &str, host: &str, origin: Option<&str>| -> (u16, String) {
+        let mut s = std::net::TcpStream::connect(&authority).unwrap();
+        let origin = origin
+            .map(|o| format!("Origin: {o}\r\n"))
+            .unwrap_or_default();
+        write!(
+            s,
+            "{method} {path} HTTP/1.1\r\nHost: {host}\r\n{origin}Content-Length: 0\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut text = String::new();
+        s.read_to_string(&mut text).unwrap();
+        let code = text.split_whitespace().nth(1).unwrap().parse().unwrap();
+        (code, text)
+    };
+    let ours = format!("127.0.0.1:{port}");
+    assert_eq!(ask("GET", "/api/options", &ours, None).0, 200);
+    assert_eq!(ask("GET", "/", &format!("localhost:{port}"), None).0, 200);
+    let (code, text) = ask("GET", "/api/model", &format!("rebind.example:{port}"), None);
+    assert_eq!(code, 403, "{text}");
+    assert!(
+        text.contains("refused: the request names host 'rebind.example"),
+        "{text}"
+    );
+    let evil = Some("http://evil.example");
+    let (code, text) = ask("POST", "/api/demo", &ours, evil);
+    assert_eq!(code, 403, "{text}");
+    assert!(text.contains("a page from 'http://evil.example'"), "{text}");
+    let page = format!("http://127.0.0.1:{port}");
+    assert_eq!(ask("POST", "/api/demo", &ours, Some(&page)).0, 200);
+}

@@ -1,7 +1,9 @@
 //! The studio's HTTP side: the page and its assets from the binary, a
 //! small JSON/binary API over `Studio`, bounded bodies, and an error for
 //! every bad request (a panic in one request is that request's 500, the
-//! server keeps serving).
+//! server keeps serving). Only this machine's own pages are answered: a
+//! request naming another host (DNS rebinding) or sent from another site's
+//! page (its Origin) is refused, as the studio is a step from a spindle.
 
 use super::packet::{extreme, mean, shrink, Packet};
 use super::settings::{CutSettings, ReliefSettings};
@@ -9,6 +11,7 @@ use super::work::{Fail, Studio};
 use super::{page, MAX_UPLOAD};
 use serde_json::{json, Value};
 use std::io::Read;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::atomic::{AtomicUsize, Ordering::SeqCst};
 use std::sync::Arc;
 use tiny_http::{Header, Method, Request, Response};
@@ -72,7 +75,12 @@ impl Reply {
 /// Serve `studio` on `server` until the process ends.
 pub fn run(server: tiny_http::Server, studio: Arc<Studio>) {
     let active = Arc::new(AtomicUsize::new(0));
+    let at = server.server_addr().to_ip();
     for rq in server.incoming_requests() {
+        if let Err(r) = at.map_or(Ok(()), |at| trusted(&rq, at)) {
+            send(rq, r);
+            continue;
+        }
         if active.load(SeqCst) >= MAX_ACTIVE {
             send(rq, Reply::error(503, "busy: too many requests at once"));
             continue;
@@ -99,6 +107,64 @@ fn send(rq: Request, r: Reply) {
     }
     // the client may have gone; nothing to do then
     let _ = rq.respond(resp);
+}
+
+/// A request's header `name`, if it has one.
+fn header_of<'a>(rq: &'a Request, name: &str) -> Option<&'a str> {
+    rq.headers()
+        .iter()
+        .find(|h| h.field.as_str().as_str().eq_ignore_ascii_case(name))
+        .map(|h| h.value.as_str())
+}
+
+/// Whether `host[:port]` names this server: an address it listens on (any
+/// IP literal when it listens on all of them) or `localhost`, at its port.
+/// A DNS name is refused: pointed at 127.0.0.1 by another site (DNS
+/// rebinding), it would hand that site the studio.
+fn names_us(authority: &str, at: SocketAddr) -> bool {
+    let (host, port) = match authority.rsplit_once(':') {
+        Some((h, p)) if !p.contains(']') => (h, p.parse::<u16>().ok()),
+        _ => (authority, Some(80)),
+    };
+    if port != Some(at.port()) {
+        return false;
+    }
+    if host.eq_ignore_ascii_case("localhost") {
+        return at.ip().is_loopback() || at.ip().is_unspecified();
+    }
+    match host
+        .trim_start_matches('[')
+        .trim_end_matches(']')
+        .parse::<IpAddr>()
+    {
+        Ok(ip) => {
+            ip == at.ip() || at.ip().is_unspecified() || (ip.is_loopback() && at.ip().is_loopback())
+        }
+        Err(_) => false,
+    }
+}
+
+/// Refuse a request for another host, or from another site's page.
+fn trusted(rq: &Request, at: SocketAddr) -> Result<(), Reply> {
+    let host = header_of(rq, "Host").unwrap_or("");
+    if !names_us(host, at) {
+        return Err(Reply::error(
+            403,
+            format!("refused: the request names host '{host}', not this studio ({at})"),
+        ));
+    }
+    if let Some(origin) = header_of(rq, "Origin") {
+        let ok = origin
+            .strip_prefix("http://")
+            .is_some_and(|o| names_us(o, at));
+        if !ok {
+            return Err(Reply::error(
+                403,
+                format!("refused: a page from '{origin}' may not use this studio"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn header(k: &str, v: &str) -> Header {
@@ -390,5 +456,36 @@ mod tests {
         );
         assert_eq!(query("/api/model?name=a%2", "name").as_deref(), Some("a%2"));
         assert_eq!(query("/api/model", "name"), None);
+    }
+
+    #[test]
+    fn only_this_machine_s_names_are_answered() {
+        let at: SocketAddr = "127.0.0.1:7171".parse().unwrap();
+        for ok in [
+            "127.0.0.1:7171",
+            "localhost:7171",
+            "LOCALHOST:7171",
+            "[::1]:7171",
+            "127.0.0.2:7171",
+        ] {
+            assert!(names_us(ok, at), "{ok}");
+        }
+        for bad in [
+            "evil.example:7171",
+            "127.0.0.1.nip.io:7171",
+            "127.0.0.1:80",
+            "127.0.0.1",
+            "192.168.1.5:7171",
+            "",
+            "[::1]",
+        ] {
+            assert!(!names_us(bad, at), "{bad}");
+        }
+        // listening on every address: any IP literal, never a DNS name
+        let all: SocketAddr = "0.0.0.0:8080".parse().unwrap();
+        assert!(names_us("192.168.1.5:8080", all) && names_us("localhost:8080", all));
+        assert!(!names_us("studio.example:8080", all));
+        let lan: SocketAddr = "192.168.1.5:8080".parse().unwrap();
+        assert!(names_us("192.168.1.5:8080", lan) && !names_us("10.0.0.1:8080", lan));
     }
 }
