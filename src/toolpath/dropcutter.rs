@@ -16,8 +16,8 @@
 //! For a ball, each block also keeps a plane and how far its surface rises
 //! above it (`plane_bound`): on sloping ground the highest corner sits on
 //! the block's uphill side while the ball meets its downhill side, and the
-//! plane's bound prunes what the corner's cannot (2048 px bunny raster
-//! drops 424k -> 760-825k points/s; ball:12 162k -> 444-513k).
+//! plane's bound prunes what the corner's cannot (its effect measured:
+//! docs/benchmarks.md, "The plane bound").
 
 use super::along::Bottom;
 use crate::grid::Grid;

@@ -263,10 +263,10 @@ fn dropped_move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, drops: 
 /// How far apart `probe_gouge` probes a move. Between creases the CL
 /// surface is smooth, bent at most as the tip is: probes this far apart
 /// miss at most CHECK / 2 of a bulge. A ball's CL surface is the ball's
-/// centre surface and on level ground bends as the ball (at 2048 px the
-/// spacing is 0.036 mm, not half a sample: the 2048 px bunny raster 2.92
-/// -> 2.43 s, same gouge); a tapered ball's flank makes peaks over
-/// vertices, so its probes stay at least two a sample.
+/// centre surface and on level ground bends as the ball (for a 3.175 mm
+/// ball 0.036 mm, wider than half a sample at 2048 px); a tapered ball's
+/// flank makes peaks over vertices, so its probes stay at least two a
+/// sample.
 fn probe_spacing(hf: &HeightField, tool: &Tool) -> f64 {
     match *tool {
         Tool::Ball { d } => (2.0 * CHECK * d).sqrt(),
