@@ -6,6 +6,7 @@
 use super::port::Port;
 use super::resume::{reentry, resume_point, standing};
 use super::sender::{self, JobLine, Options, Outcome, Replies};
+use super::state::State;
 use crate::bail;
 use crate::error::Result;
 use std::path::PathBuf;
@@ -75,14 +76,14 @@ impl SendJob {
                  or the link is bad; nothing was sent"
             );
         };
-        if st.state.starts_with("Alarm") {
+        if st.state == State::Alarm {
             bail!(
                 "GRBL is in alarm (position may be lost after a reset in motion): check the \
                  machine, then `relievo machine home` or `unlock` on this port, and send again"
             );
         }
         // an idle machine's free planner blocks are all its blocks
-        if let (true, Some((blocks, _))) = (st.state == "Idle", st.free) {
+        if let (State::Idle, Some((blocks, _))) = (st.state, st.free) {
             opts.planner = blocks.max(1);
         }
         // steps per mm tell which moves surely take a planner block; the

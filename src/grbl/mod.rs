@@ -7,6 +7,7 @@ pub mod port;
 pub mod resume;
 pub mod sender;
 pub mod sim;
+pub mod state;
 
 /// GRBL 1.1's meaning of `error:N`.
 pub fn error_meaning(n: u32) -> &'static str {

@@ -6,6 +6,7 @@
 
 use super::port::Port;
 use super::resume::{Journal, Tracker};
+use super::state::State;
 use super::{
     alarm_meaning, error_meaning, CYCLE_START, FEED_HOLD, SOFT_RESET, SPINDLE_STOP, STATUS,
 };
@@ -398,7 +399,7 @@ impl<'a> Replies<'a> {
 /// A status report: `<State|MPos:x,y,z|Bf:blocks,bytes|...>`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Status {
-    pub state: String,
+    pub state: State,
     pub pos: [f64; 3],
     /// Free planner blocks and free receive-buffer bytes.
     pub free: Option<(usize, usize)>,
@@ -408,7 +409,7 @@ pub struct Status {
 pub fn parse_status(l: &str) -> Option<Status> {
     let body = l.strip_prefix('<')?.strip_suffix('>')?;
     let mut parts = body.split('|');
-    let state = parts.next()?.to_string();
+    let state = State::parse(parts.next()?)?;
     let mut pos = [0.0; 3];
     let mut bf = None;
     for p in parts {
@@ -665,7 +666,7 @@ pub fn stream(
             break;
         } else if let Some(st) = parse_status(&l) {
             last_reply = r.port.now();
-            holding = st.state.starts_with("Hold");
+            holding = matches!(st.state, State::Hold(_));
             progress.set(out.acked, Some(st.pos));
             if let (Some(j), Some((blocks, _))) = (journal.as_mut(), st.free) {
                 if let Some(e) = tracker.status(blocks) {
@@ -675,14 +676,14 @@ pub fn stream(
             // held at the gate's M0 (everything before it answered; GRBL
             // answers the M0 itself when released)
             let at_gate = gate.filter(|g| !g.1 && inflight.front().is_none_or(|f| f.0 >= g.0));
-            if let (Some((g, _)), true) = (at_gate, st.state.starts_with("Hold")) {
+            if let (Some((g, _)), State::Hold(_)) = (at_gate, st.state) {
                 let k = items[g].job.unwrap_or(0);
                 keys.cooked(|| progress.suspend(|| resume_pause(r, &lines[k], opts.on_pause)))?;
                 gate = Some((g, true));
                 hold_since = None;
                 // (the operator's time is not the link's silence)
                 last_reply = r.port.now();
-            } else if st.state.starts_with("Hold") || st.state.starts_with("Door") {
+            } else if st.state.is_held() {
                 let since = *hold_since.get_or_insert(now);
                 if now - since > opts.hold_limit && !stopping {
                     r.port.write_all(&[super::SPINDLE_STOP])?;
@@ -700,7 +701,7 @@ pub fn stream(
             let drained = st
                 .free
                 .is_some_and(|(p, rx)| p == opts.planner && rx >= opts.rx_buffer);
-            if st.state == "Idle" && drained && !inflight.is_empty() && !check_mode {
+            if st.state == State::Idle && drained && !inflight.is_empty() && !check_mode {
                 let since = *idle_since.get_or_insert(now);
                 let grace = 2.0 + inflight.front().map_or(0.0, |f| items[f.0].dwell);
                 if now - since > grace {

@@ -5,6 +5,7 @@
 //! check mode, alarms, and injectable faults. It has no clock of its own:
 //! the port that carries its bytes says what time it is.
 
+use super::state::State;
 use super::{JOG_CANCEL, SOFT_RESET, WELCOME};
 use crate::gcode::modal::{Modal, Probe, Step, PROBE_TOWARD};
 use crate::gcode::parse::{parse_line, strip};
@@ -501,17 +502,17 @@ impl SimGrbl {
 
     fn status(&mut self) -> String {
         let state = if self.alarm.is_some() {
-            "Alarm"
+            State::Alarm
         } else if self.held_left.is_some() || self.stuck || self.paused.is_some() {
-            "Hold:0"
+            State::Hold(0)
         } else if self.check {
-            "Check"
+            State::Check
         } else if self.planner.front().is_some_and(|b| b.jog) {
-            "Jog"
+            State::Jog
         } else if !self.planner.is_empty() || self.probing.is_some() {
-            "Run"
+            State::Run
         } else {
-            "Idle"
+            State::Idle
         };
         let p = self.done;
         let mut s = format!(
