@@ -599,6 +599,44 @@ fn check_mode_runs_through_a_tool_change() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// A controller that goes on answering status polls but neither moves nor
+/// acknowledges is not waited on for ever: past the limit the sender stops
+/// (feed hold, spindle off) and says where it waited. A long dwell is not
+/// a stall: its own time is allowed for.
+#[test]
+fn a_frozen_controller_is_not_waited_on_for_ever() {
+    let d = scratch("send-frozen");
+    let (path, _) = write_spiral(&d, 300, 0.1);
+    let mut p = port(Faults {
+        freeze_at: Some(120),
+        ..Default::default()
+    });
+    let e = SendJob {
+        hold_limit: Some(60.0),
+        ..job(&path)
+    }
+    .run(&mut p, &AtomicBool::new(false))
+    .unwrap_err();
+    assert!(
+        e.0.contains("GRBL reported Run but neither moved nor acknowledged a line for 6")
+            && e.0.contains("spindle was stopped"),
+        "{e}"
+    );
+    // a 90 s dwell within a 60 s limit runs to the end
+    let dwell = d.join("dwell.nc");
+    std::fs::write(&dwell, "G21 G90\nG1 X1 F500\nG4 P90\nG1 X2\nG1 X3\n").unwrap();
+    let mut p = port(Faults::default());
+    SendJob {
+        hold_limit: Some(60.0),
+        ..job(&dwell)
+    }
+    .run(&mut p, &AtomicBool::new(false))
+    .unwrap();
+    finish(&mut p);
+    assert_eq!(p.sim.log.len(), 5, "{:?}", p.sim.log);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// The job's `(tool: SPEC ...)` comments in order.
 fn tool_specs(text: &str) -> Vec<String> {
     text.lines()

@@ -34,6 +34,10 @@ pub struct GrblSimArgs {
     /// release (a stuck hold button, an open door), until a reset.
     #[arg(long, value_name = "N")]
     pub hold_at: Option<usize>,
+    /// Fault: at the Nth G-code line the machine freezes: it answers
+    /// status polls (Run) but neither moves nor takes another line.
+    #[arg(long, value_name = "N")]
+    pub freeze_at: Option<usize>,
     /// Fault: after the welcome, answer nothing and print [MSG:] lines.
     #[arg(long)]
     pub chatty: bool,
@@ -93,6 +97,7 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
         disconnect_after: args.disconnect_after,
         garble: args.garble,
         hold_at: args.hold_at,
+        freeze_at: args.freeze_at,
         chatty: args.chatty,
     };
     let (mut master, slave) = serialport::TTYPort::pair()

@@ -41,8 +41,10 @@ pub struct SendArgs {
     /// Seconds without an answer from GRBL that mean the link is dead.
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub link_timeout: f64,
-    /// Seconds the machine may stay in feed hold (or with its door open)
-    /// before `send` stops the spindle and gives up.
+    /// Seconds the machine may stay in feed hold (or with its door open),
+    /// or stand still acknowledging nothing (beyond a dwell's own time),
+    /// before `send` stops the spindle and gives up; a stall is told after
+    /// 30 s.
     #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
     pub hold_limit: f64,
     /// At an M0 (a tool change): ask on the terminal, continue at once,

@@ -199,9 +199,13 @@ pub struct Options {
     /// Seconds without an answer (`ok`, `error`, alarm or status report)
     /// that mean the link is dead.
     pub link_timeout: f64,
-    /// Seconds the machine may stay in Hold (or Door) before the sender
-    /// gives up, stops the spindle and says so.
+    /// Seconds the machine may stay in Hold (or Door), or stand still
+    /// acknowledging nothing, before the sender gives up, stops the spindle
+    /// and says so.
     pub hold_limit: f64,
+    /// Seconds of standing still with nothing acknowledged (beyond a
+    /// dwell's own time) before the sender says so.
+    pub stall_warning: f64,
     /// GRBL's planner blocks (from a status report's `Bf:` when idle).
     pub planner: usize,
     /// When each line should end by the time estimate (for the ETA).
@@ -225,6 +229,7 @@ impl Default for Options {
             progress: false,
             link_timeout: 10.0,
             hold_limit: 600.0,
+            stall_warning: 30.0,
             planner: super::sim::PLANNER_BLOCKS,
             min_move: MIN_MOVE,
             clock: None,
@@ -254,6 +259,13 @@ pub enum Stop {
     Held {
         seconds: f64,
     },
+    /// The machine neither moved nor acknowledged a line for longer than
+    /// the limit, while still answering status polls.
+    Stalled {
+        seconds: f64,
+        state: State,
+        line: Option<usize>,
+    },
 }
 
 impl Stop {
@@ -272,6 +284,15 @@ impl Stop {
             Stop::Held { seconds } => format!(
                 "the machine stayed in Hold for {seconds:.0} s (a hold button, an open door?): \
                  streaming stopped and the spindle was stopped"
+            ),
+            Stop::Stalled {
+                seconds,
+                state,
+                line,
+            } => format!(
+                "GRBL reported {state} but neither moved nor acknowledged a line for \
+                 {seconds:.0} s{}: streaming stopped and the spindle was stopped",
+                line.map_or(String::new(), |l| format!(" (waiting on job line {l})"))
             ),
         }
     }
@@ -545,6 +566,9 @@ pub fn stream(
     let mut hold_since: Option<f64> = None;
     let mut stop_time: Option<f64> = None;
     let mut last_reply = start;
+    // the watchdog: when a line was last acknowledged or the tool last
+    // moved, and whether the stall was told
+    let (mut last_sign, mut last_pos, mut told) = (start, None, false);
     let mut tracker = Tracker::new(opts.planner, opts.min_move);
     // a sent M0 (item index) nothing is sent past until its pause is
     // dealt with; and whether cycle start has released it
@@ -633,6 +657,8 @@ pub fn stream(
             };
             used -= len;
             idle_since = None;
+            last_sign = last_reply;
+            told = false;
             if let Some(code) = l.strip_prefix("error:") {
                 let code = code.trim().parse().unwrap_or(0);
                 let (line, text) = match items[item].job {
@@ -694,6 +720,36 @@ pub fn stream(
                 }
             } else {
                 hold_since = None;
+            }
+            if last_pos != Some(st.pos) {
+                (last_pos, last_sign, told) = (Some(st.pos), now, false);
+            }
+            // standing still, nothing acknowledged, not held nor dwelling:
+            // say so, and past the limit stop
+            let dwell = inflight.front().map_or(0.0, |f| items[f.0].dwell);
+            let still = now - last_sign - dwell;
+            let stalled = !inflight.is_empty() && !stopping && !st.state.is_held();
+            if stalled && still > opts.stall_warning && !told {
+                told = true;
+                let line = inflight.front().and_then(|f| job_line(f.0)).unwrap_or(0);
+                progress.suspend(|| {
+                    eprintln!(
+                        "warning: GRBL reports {} at X{:.3} Y{:.3} Z{:.3} but has neither moved nor \
+                         acknowledged a line for {:.0} s (waiting on job line {line}); \
+                         Ctrl-C stops the job",
+                        st.state, st.pos[0], st.pos[1], st.pos[2], still
+                    )
+                });
+            }
+            if stalled && still > opts.hold_limit {
+                r.port.write_all(&[FEED_HOLD])?;
+                spindle_stop_once_held(r)?;
+                out.stop = Some(Stop::Stalled {
+                    seconds: still,
+                    state: st.state,
+                    line: inflight.front().and_then(|f| job_line(f.0)),
+                });
+                break;
             }
             // an Idle machine with an empty buffer still owing replies
             // has lost them (a cheap adapter dropped bytes); a dwell is

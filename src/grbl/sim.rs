@@ -33,6 +33,9 @@ pub struct Faults {
     /// At line N the machine goes into a feed hold that cycle start does
     /// not release (a hold button stuck, a door left open), until a reset.
     pub hold_at: Option<usize>,
+    /// At line N the machine freezes: it still answers status polls (as
+    /// Run) but neither moves nor takes another line, until a reset.
+    pub freeze_at: Option<usize>,
     /// After its welcome the machine answers nothing and only prints
     /// `[MSG:...]` lines, ten a second (a confused or foreign firmware).
     pub chatty: bool,
@@ -143,6 +146,8 @@ pub struct SimGrbl {
     dwell: Option<(f64, String)>,
     /// A feed hold that cycle start does not release (fault).
     stuck: bool,
+    /// Frozen by the `freeze_at` fault: no motion, no new line.
+    frozen: bool,
     /// Held by an M0 until cycle start: its line, answered then (GRBL's
     /// main loop waits in the hold, taking no further line).
     paused: Option<String>,
@@ -206,6 +211,7 @@ impl SimGrbl {
             waiting: None,
             dwell: None,
             stuck: false,
+            frozen: false,
             paused: None,
             next_chatter: 0.0,
             log: Vec::new(),
@@ -247,8 +253,11 @@ impl SimGrbl {
 
     /// When the running block completes, if one runs.
     fn block_due(&self) -> Option<f64> {
-        (self.held_left.is_none() && self.paused.is_none() && !self.planner.is_empty())
-            .then_some(self.block_end)
+        (self.held_left.is_none()
+            && self.paused.is_none()
+            && !self.frozen
+            && !self.planner.is_empty())
+        .then_some(self.block_end)
     }
 
     /// When something happens next: a block completes, a dwell ends, or
@@ -476,6 +485,7 @@ impl SimGrbl {
         self.last_dir = None;
         self.held_left = None;
         self.stuck = false;
+        self.frozen = false;
         self.paused = None;
         self.waiting = None;
         self.dwell = None;
@@ -653,7 +663,11 @@ impl SimGrbl {
     /// the planner to empty), as GRBL's main loop does.
     fn pump(&mut self) {
         loop {
-            if self.dwell.is_some() || self.probing.is_some() || self.paused.is_some() {
+            if self.dwell.is_some()
+                || self.probing.is_some()
+                || self.paused.is_some()
+                || self.frozen
+            {
                 return;
             }
             if let Some(line) = self.waiting.take() {
@@ -705,6 +719,9 @@ impl SimGrbl {
             self.waiting = Some(line);
         } else {
             self.run(line);
+        }
+        if self.faults.freeze_at == Some(n) {
+            self.frozen = true;
         }
         if self.faults.hold_at == Some(n) {
             self.stuck = true;
