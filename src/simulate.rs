@@ -196,7 +196,7 @@ impl SimulateJob {
         let tool = self
             .tool
             .as_deref()
-            .map(|s| Tool::parse(s).map_err(|e| crate::Error(format!("--tool {}", e.0))))
+            .map(|s| machine.tool_for("--tool", s))
             .transpose()?;
         let mut tools = Vec::new();
         for (what, prog, _) in &progs {

@@ -442,3 +442,34 @@ fn the_deviation_map_has_a_scale_and_no_bands() {
         .count();
     assert!(white > 50, "no figures under the bar");
 }
+
+/// `--tool` takes a name from the machine's tool table as `toolpath` does:
+/// T2 on the generic profile is its 1/8 in ball, and cuts as `ball:3.175`;
+/// a name the table lacks is refused with the table's names.
+#[test]
+fn tool_table_names_work_in_simulate() {
+    let d = scratch("sim-tool-table");
+    let relief = flat_relief(&d, 200, 100, PITCH);
+    let job = "G21 G90\nG0 Z5\nG0 X2 Y5\nG1 Z-1 F100\nG1 X18 F300\nG0 Z5\nM30\n";
+    let (_, _, by_name, _) = simulate(&d, &relief, job, "T2");
+    let (_, _, by_spec, _) = simulate(&d, &relief, job, "ball:3.175");
+    assert_eq!(by_name, by_spec);
+    let nc = d.join("job.nc");
+    let out = run(&[
+        "simulate",
+        nc.to_str().unwrap(),
+        "--relief",
+        relief.to_str().unwrap(),
+        "--tool",
+        "T9",
+        "-o",
+        d.join("x.png").to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        said.contains("--tool T9: not a tool spec") && said.contains("T1, T2"),
+        "{said}"
+    );
+    std::fs::remove_dir_all(d).unwrap();
+}

@@ -24,7 +24,8 @@ pub struct SimulateArgs {
     /// Relief depth in mm, for a heightmap without sidecar.
     #[arg(long, allow_negative_numbers = true)]
     pub depth: Option<f64>,
-    /// ball:D, flat:D, taperball:TIP_RADIUS:HALF_ANGLE[:D], vbit:ANGLE[:D] [default: the job's (tool: ..) comment].
+    /// ball:D, flat:D, taperball:TIP_RADIUS:HALF_ANGLE[:D], vbit:ANGLE[:D], or a name from
+    /// the machine's tool table (T1, T2, ...) [default: the job's (tool: ..) comment].
     #[arg(long)]
     pub tool: Option<String>,
     /// Stock WIDTHxHEIGHTxTHICKNESS in mm [default: as the job's frame
