@@ -138,7 +138,10 @@ fn say_sources(m: &clap::ArgMatches, settings: &Settings) {
 
 fn main() -> ExitCode {
     // `config` must work whatever the file holds: it is how to mend it
-    let configuring = std::env::args().nth(1).as_deref() == Some("config");
+    let configuring = std::env::args()
+        .skip(1)
+        .find(|a| !a.starts_with('-'))
+        .is_some_and(|a| a == "config");
     let settings = match Settings::load() {
         Ok(s) => s,
         Err(_) if configuring => Settings::default(),

@@ -37,6 +37,8 @@ impl Progress {
             if let Ok(style) = indicatif::ProgressStyle::with_template(SPIN) {
                 pb.set_style(style);
             }
+            // (after the style: a bar without a length would show 0%)
+            pb.unset_length();
             pb.set_message(what.to_string());
         }
     }

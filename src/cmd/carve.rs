@@ -63,8 +63,7 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
     };
     relievo::output::interrupt::keep_all();
     if !quiet {
-        let written: Vec<String> = r.written.iter().map(|p| p.display().to_string()).collect();
-        eprintln!("relief -> {}", written.join(", "));
+        eprintln!("relief -> {}", super::paths(&r.written));
     }
     report(&s, quiet, verbose);
     Ok(())

@@ -59,6 +59,12 @@ pub fn with_spinner<T>(quiet: bool, what: &str, work: impl FnOnce() -> T) -> T {
     out
 }
 
+/// Files written, as a summary names them: `a.png, a.json`.
+pub fn paths(list: &[std::path::PathBuf]) -> String {
+    let names: Vec<String> = list.iter().map(|p| p.display().to_string()).collect();
+    names.join(", ")
+}
+
 /// Stage timings for --verbose.
 pub fn print_timings(t: &relievo::timing::Timings) {
     eprintln!(

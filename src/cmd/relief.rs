@@ -225,11 +225,7 @@ pub fn run(args: ReliefArgs, quiet: bool, verbose: bool) -> relievo::Result<()> 
             r.height_mm,
             r.depth_mm,
             s.silhouette_edges,
-            s.written
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", ")
+            super::paths(&s.written)
         );
     }
     if verbose {

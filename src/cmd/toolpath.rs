@@ -263,11 +263,7 @@ pub fn report(s: &relievo::cam::CamSummary, quiet: bool, verbose: bool) {
         );
         eprintln!(
             "{}: {} lines ({} CL points merged), stepover {:.3} mm, estimated {}",
-            s.written
-                .iter()
-                .map(|p| p.display().to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
+            super::paths(&s.written),
             s.lines,
             s.raw_points,
             s.stepover_mm,

@@ -12,7 +12,7 @@ pub use mesh::Mesh;
 pub use raster::DepthMap;
 
 use crate::bail;
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 /// Render `mesh` as seen by `cam`, long side `long_px` times `supersample`;
 /// with `smooth` (a crease angle in degrees), surfaces carry slopes from
@@ -51,7 +51,7 @@ pub fn render(
     }
     let ids: Vec<u16> = mesh.tri_object.iter().map(|o| o + 1).collect();
     let slopes = smooth.map(|angle| corner_slopes(mesh, &pos, &pr, angle));
-    let r = raster::rasterize(
+    let (h, id, surfaces) = raster::rasterize(
         &pr.points,
         &mesh.triangles,
         &ids,
@@ -60,7 +60,7 @@ pub fn render(
         (progress, raster::MAX_PIXEL_TESTS),
     )
     .map_err(|deep| {
-        crate::error::Error(format!(
+        Error(format!(
             "{:.2} million triangles, many of them large and stacked deep behind each \
              other, would take more than {} billion pixel tests to draw at {} x {} px; \
              decimate the mesh or lower --resolution",
@@ -69,8 +69,7 @@ pub fn render(
             pr.w,
             pr.h
         ))
-    });
-    let (h, id, surfaces) = r?;
+    })?;
     Ok(DepthMap {
         h,
         id,

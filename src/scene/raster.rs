@@ -344,8 +344,10 @@ pub fn rasterize(
         AtomicUsize::new(0),
     );
     let cols = w.div_ceil(TILE);
+    // (only the coarse test of a deep picture asks)
     let reach = setups
         .iter()
+        .filter(|_| deep)
         .fold(((w, 0), (h, 0)), |((x0, x1), (y0, y1)), t| {
             (
                 (x0.min(t.x0), x1.max(t.x1 + 1)),
@@ -373,10 +375,12 @@ pub fn rasterize(
                 open: Vec::with_capacity(cols),
             };
             // tiles no triangle reaches hold nothing to be behind
-            for c in (0..cols).filter(|_| deep) {
-                band.far[c] = band.farthest(c);
-                if band.far[c] < f32::INFINITY {
-                    band.open.push(c);
+            if deep {
+                for c in 0..cols {
+                    band.far[c] = band.farthest(c);
+                    if band.far[c] < f32::INFINITY {
+                        band.open.push(c);
+                    }
                 }
             }
             let mut made = 0u64;
