@@ -7,6 +7,8 @@
 //! flanks slope at `TAB_FLANK` degrees, so that no layer drops into
 //! material steeper than that (the tab is `width` long at its top).
 
+use crate::bail;
+use crate::error::Result;
 use crate::toolpath::Pass;
 use glam::DVec3;
 
@@ -124,6 +126,90 @@ pub fn passes(
             Pass { pts, clear_z }
         })
         .collect()
+}
+
+impl super::ToolpathJob {
+    /// The cutout stage, when asked for: with the job's roughing tool,
+    /// else the machine's largest flat end mill up to 1/4 in, else the
+    /// finishing tool; in layers no deeper than it may slot.
+    pub(super) fn cutout_stage(&self, w: &mut super::setup::Work) -> Result<Option<super::Op>> {
+        use super::Op;
+        let Some(c) = &self.cutout else {
+            return Ok(None);
+        };
+        let (m, relief, plan, limits) = (&w.machine, &w.relief, &w.plan, &w.limits);
+        let name = match &w.rough {
+            Some(r) => Some(r.asked.tool.clone()),
+            None => m.roughing_tool(&w.tool).map(|(n, _)| n),
+        };
+        let ct = match &name {
+            Some(n) => m.tool(n)?,
+            None => w.tool,
+        };
+        let d = ct.working_diameter();
+        let (pw, ph) = (relief.width_mm, relief.height_mm);
+        let (sw, sh, st) = plan.stock;
+        let (ax, ay) = plan.panel_at;
+        let room = ax.min(ay).min(sw - pw - ax).min(sh - ph - ay);
+        if room < d - 1e-9 {
+            bail!(
+                "--cutout: {} needs {d:.2} mm of stock round the panel, there is {room:.2} mm; \
+                 give a larger --stock or a --margin",
+                ct.spec()
+            );
+        }
+        let ok_tab = c.tab_width.is_finite() && c.tab_width > 0.0;
+        if !(ok_tab && c.tab_height.is_finite() && c.tab_height > 0.0 && c.tab_height < st) {
+            bail!(
+                "--tab-width {} / --tab-height {}: must be positive, the height below the \
+                 stock's {st} mm",
+                c.tab_width,
+                c.tab_height
+            );
+        }
+        let (dc, slot) = limits.material_of(&ct);
+        let step = if dc.min(slot).is_finite() {
+            dc.min(slot)
+        } else {
+            ct.radius()
+        };
+        let settings = self.settings(m, &ct, w.material.as_ref(), &mut w.notes)?;
+        let passes = passes(
+            [0.0, 0.0, pw, ph],
+            ct.radius(),
+            st,
+            step,
+            c,
+            settings.safe_z,
+        );
+        let layers = passes.len();
+        w.notes.push(format!(
+            "cutout with {}: {layers} layers of {:.2} mm through {:.2} mm, {} tabs {} mm long, \
+             {} mm high",
+            ct.spec(),
+            (st + BREAK_THROUGH) / layers as f64,
+            st + BREAK_THROUGH,
+            c.tabs,
+            c.tab_width,
+            c.tab_height
+        ));
+        let passes = w.planned.ramp_and_cut(passes, ct, true);
+        Ok(Some(Op {
+            title: "cutout",
+            tool: ct,
+            zero: String::new(),
+            settings,
+            strategy: format!(
+                "cutout round the panel, {:.2} mm deep in {layers} layers, {} tabs {} mm long \
+                 and {} mm high",
+                st + BREAK_THROUGH,
+                c.tabs,
+                c.tab_width,
+                c.tab_height
+            ),
+            passes,
+        }))
+    }
 }
 
 #[cfg(test)]

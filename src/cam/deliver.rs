@@ -3,9 +3,11 @@
 //! simulator (depth of cut, plunges, residual, travel), headed with the
 //! notes and estimated times that judging settles, and written.
 
+use super::finishing::LAYERS;
+use super::setup::Work;
 use super::{
-    judge, layout, sim, stock, tile, view, CamSummary, Finish, JobFile, Limits, Op, Origin,
-    ToolpathJob, Units, ZZero,
+    judge, layout, sim, stock, tile, view, CamSummary, Finish, JobFile, Op, Origin, ToolpathJob,
+    Units, ZZero,
 };
 use crate::bail;
 use crate::error::Result;
@@ -13,44 +15,33 @@ use crate::gcode::emit::Emitter;
 use crate::machine::Machine;
 use crate::output::Outputs;
 use crate::relief::Relief;
-use crate::timing::Timings;
 use crate::tool::Tool;
 use crate::toolpath::Pass;
 use glam::DVec3;
-use std::path::PathBuf;
 
-/// What planning made besides the ops, for delivering them.
-pub(super) struct Made<'a> {
-    pub relief: &'a Relief,
-    pub plan: &'a layout::Plan,
-    pub m: &'a Machine,
-    /// The finishing tool.
-    pub tool: Tool,
-    /// The stock cells' size (mm).
-    pub cell: f64,
-    /// The touch-off pad: centre and side (mm).
-    pub pad: Option<(f64, f64, f64)>,
-    pub limits: &'a Limits,
-    pub raw_points: usize,
-    /// The finishing stepover (mm).
-    pub step: f64,
-    /// Where a split job's roughing goes.
-    pub rough_out: PathBuf,
+/// The emitted files of a job: each file's path and text, its program
+/// placed in the one job's frame, and the line each of its ops starts
+/// after.
+struct Emitted {
+    texts: Vec<(std::path::PathBuf, String)>,
+    progs: Vec<crate::gcode::Program>,
+    op_starts: Vec<Vec<usize>>,
+}
+
+/// Each file's time and its share by op: what a carver plans the tool
+/// changes and the day by.
+struct Times {
+    parts: Vec<Vec<(String, f64)>>,
+    times: Vec<f64>,
 }
 
 impl ToolpathJob {
     /// Emit, judge, head and write the ops (see the module doc).
-    pub(super) fn deliver(
-        &self,
-        mut ops: Vec<Op>,
-        made: Made<'_>,
-        mut notes: Vec<String>,
-        mut t: Timings,
-    ) -> Result<CamSummary> {
-        let Made {
+    pub(super) fn deliver(&self, mut ops: Vec<Op>, w: Work) -> Result<CamSummary> {
+        let Work {
             relief,
             plan,
-            m,
+            machine,
             tool,
             cell,
             pad,
@@ -58,91 +49,33 @@ impl ToolpathJob {
             raw_points,
             step,
             rough_out,
-        } = made;
-        // emit: one file, tool changes with M0, or one file per tool
-        let shift = plan.shift;
-        let z_shift = match self.z_zero {
-            ZZero::Top => 0.0,
-            ZZero::Bottom => plan.stock.2,
-        };
-        let zero = match (self.z_zero, pad) {
-            (ZZero::Bottom, _) => "set Z0 on the spoilboard (the stock's bottom)".to_string(),
-            (ZZero::Top, Some(p)) => format!(
-                "set Z0 on the pad's top at X{:.1} Y{:.1} (the stock top)",
-                p.0 + shift.x,
-                p.1 + shift.y
-            ),
-            (ZZero::Top, None) => "set Z0 on the stock top again".to_string(),
-        };
-        for op in &mut ops {
-            op.zero = match (self.z_zero, op.title) {
-                (ZZero::Top, "cutout") => "set Z0 on the stock top beside the panel".into(),
-                _ => zero.clone(),
-            };
-        }
+            mut notes,
+            mut t,
+            ..
+        } = w;
+        let (relief, plan, m, limits) = (&relief, &plan, &machine, &limits);
+        let z_shift = self.zero_ops(&mut ops, plan, pad);
         let n_rough = ops.iter().take_while(|o| o.title == "roughing").count();
         let rough_tool = (n_rough > 0).then(|| ops[0].tool);
-        let mut header_notes = notes.clone();
-        if let Some(p) = pad {
-            header_notes.push(format!(
-                "touch-off pad: {:.0} mm square at X{:.1} Y{:.1}, left at the stock top by roughing, cut last",
-                p.2,
-                p.0 + shift.x,
-                p.1 + shift.y
-            ));
-        }
-        // the files: one job, a split job, or one job per tile; each with
-        // its own frame and header notes
-        let files: Vec<JobFile> = match self.layout.tile {
-            Some(size) => t.time("tiles", || {
-                self.tiled(
-                    ops,
-                    relief,
-                    plan,
-                    size,
-                    (&tool, cell),
-                    &header_notes,
-                    z_shift,
-                )
-            })?,
-            None if self.split && n_rough > 0 => {
-                let rest = ops.split_off(n_rough);
-                vec![
-                    (rough_out, ops, plan.clone(), header_notes.clone()),
-                    (
-                        self.output.clone(),
-                        rest,
-                        plan.clone(),
-                        header_notes.clone(),
-                    ),
-                ]
-            }
-            None => vec![(self.output.clone(), ops, plan.clone(), header_notes.clone())],
+        let header_notes = self.header_notes(&notes, plan, pad);
+        let files = || {
+            let finish_cell = (&tool, cell);
+            self.job_files(
+                ops,
+                n_rough,
+                relief,
+                plan,
+                finish_cell,
+                &header_notes,
+                z_shift,
+                rough_out,
+            )
         };
-        let mut texts = Vec::new();
-        // per file: the line each of its ops starts after
-        let mut op_starts = Vec::new();
-        for (file, group, fplan, fnotes) in &files {
-            let (text, starts) = t.time("g-code", || {
-                self.emit(group, relief, fplan, m, z_shift, fnotes)
-            });
-            texts.push((file.clone(), text));
-            op_starts.push(starts);
-        }
-        // the simulator judges the job: depth of cut, plunges, residual;
-        // every file placed in the one job's frame
-        let progs: Vec<crate::gcode::Program> = texts
-            .iter()
-            .map(|(_, text)| crate::gcode::program(text))
-            .collect::<Result<_>>()?;
-        for ((file, _), prog) in texts.iter().zip(&progs) {
-            judge::fits_travel(prog, m, file)?;
-        }
-        let progs: Vec<crate::gcode::Program> = progs
-            .iter()
-            .zip(&files)
-            .map(|(p, f)| p.moved(plan.shift - f.2.shift))
-            .collect();
+        let files = match self.layout.tile {
+            Some(_) => t.time("tiles", files)?,
+            None => files()?,
+        };
+        let emitted = self.emit_files(&files, relief, plan, m, z_shift, &mut t)?;
         // judged on the cells `simulate` takes by default (a cut hides at
         // most 1 um between their centres), so that carve reports what
         // simulate finds: on the planning cells the top of a wall the
@@ -159,43 +92,9 @@ impl ToolpathJob {
             cell.min(pitch / k as f64)
         };
         let mut judged = t.time("judge", || {
-            judge::run(&progs, relief, plan, z_shift, judge_cell)
+            judge::run(&emitted.progs, relief, plan, z_shift, judge_cell)
         })?;
-        let groups = &files;
-        if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.of(tl)) {
-            let what = format!(
-                "{}line {}: {} cuts {:.3} mm deep{} (allowed {:.3} mm in {})",
-                if groups.len() > 1 {
-                    format!("{}, ", groups[k].0.display())
-                } else {
-                    String::new()
-                },
-                o.line,
-                o.tool.spec(),
-                o.depth,
-                if o.slotting { " at full width" } else { "" },
-                o.limit,
-                limits.name
-            );
-            // the op the line belongs to: the last that starts before it
-            let op = op_starts[k].iter().rposition(|&s| s < o.line).unwrap_or(0);
-            let roughing = groups[k].1[op].title == "roughing";
-            let advice = match rough_tool {
-                // roughing is there: the spot is one it cannot reach (a
-                // channel or corner narrower than its tool) and the
-                // finishing tool's own layers cannot be entered
-                Some(rt) if !roughing => format!(
-                    "{} cannot reach there, nor can the finishing tool's layers be entered: \
-                     rough with a smaller tool (--rough flat:D), or pass --allow-deep-cuts",
-                    rt.spec()
-                ),
-                Some(_) => "lower --step-down, or pass --allow-deep-cuts".into(),
-                None => {
-                    "rough first (--rough), lower --step-down, or pass --allow-deep-cuts".into()
-                }
-            };
-            bail!("{what}: {advice}");
-        }
+        refuse_too_deep(&judged, &emitted, &files, limits, rough_tool)?;
         if self.finish == Finish::Waterline {
             notes.push(format!(
                 "waterline alone leaves up to {:.3} mm (mean {:.3} mm) on gentle slopes, \
@@ -211,67 +110,187 @@ impl ToolpathJob {
             .filter(|n| !header_notes.contains(n))
             .cloned()
             .collect();
-        // each file's time, and its share by op: what a carver plans the
-        // tool changes and the day by
-        let parts: Vec<Vec<(String, f64)>> = progs
-            .iter()
-            .zip(&op_starts)
-            .zip(groups)
-            .map(|((p, starts), f)| {
-                let secs = sim::time_by_part(p, m, starts);
-                op_shares(f.1.iter().map(|o| (o.title, &o.tool)), &secs)
-            })
-            .collect();
-        let times: Vec<f64> = parts
-            .iter()
-            .map(|ps| ps.iter().map(|p| p.1).sum())
-            .collect();
-        if let Some(n) = layers_advice(&parts, &times, &tool, m) {
+        let times = file_times(&emitted, &files, m);
+        if let Some(n) = layers_advice(&times.parts, &times.times, &tool, m) {
             notes.push(n.clone());
             extra.push(n);
         }
-        let estimate = |k: usize| {
-            let split = if parts[k].len() > 1 {
-                format!(": {}", sim::shares_text(&parts[k]))
-            } else {
-                String::new()
-            };
-            format!(
-                "estimated time: {} on {}{split}",
-                sim::hms(times[k]),
-                m.name
-            )
-        };
+        let estimate = |k: usize| times.estimate(k, m);
         let added =
             |extra: &[String], k: usize| comment_lines(extra) + comment_lines(&[estimate(k)]);
         if self.allow_deep_cuts {
-            if let Some((k, o)) = judge::first_over(&judged, &progs, &|tl| limits.material_of(tl)) {
-                let note = |by: usize| {
-                    format!(
-                        "--allow-deep-cuts: line {} cuts {:.3} mm deep with {} (limit {:.3} mm)",
-                        o.line + by,
-                        o.depth,
-                        o.tool.spec(),
-                        o.limit
-                    )
-                };
-                // the note's own lines count: settle the number twice
-                let mut by = added(&extra, k);
-                for _ in 0..2 {
-                    let with: Vec<String> = extra.iter().cloned().chain([note(by)]).collect();
-                    by = added(&with, k);
-                }
-                notes.push(note(by));
-                extra.push(note(by));
+            if let Some(n) = deep_cuts_note(&judged, &emitted.progs, limits, &extra, &added) {
+                notes.push(n.clone());
+                extra.push(n);
             }
         }
         judged.engagement.shift_lines(added(&extra, 0));
+        let (rapid_mm, cut_mm) = judge::travel(&emitted.progs);
+        let (lines, written) = self.write(
+            emitted,
+            &judged,
+            relief,
+            plan,
+            z_shift,
+            (&extra, &estimate),
+            &mut t,
+        )?;
+        Ok(CamSummary {
+            lines,
+            raw_points,
+            time_s: times.times.iter().sum(),
+            time_by_op: total_shares(times.parts.into_iter().flatten()),
+            stepover_mm: step,
+            written,
+            notes,
+            engagement: judged.engagement,
+            residual: judged.residual,
+            gouge: judged.gouge,
+            rapid_mm,
+            cut_mm,
+            timings: t,
+        })
+    }
+
+    /// Each op's Z zero for the operator, and the Z shift of the job's
+    /// coordinates (the stock's thickness with Z0 on the spoilboard).
+    fn zero_ops(&self, ops: &mut [Op], plan: &layout::Plan, pad: Option<(f64, f64, f64)>) -> f64 {
+        let shift = plan.shift;
+        let zero = match (self.z_zero, pad) {
+            (ZZero::Bottom, _) => "set Z0 on the spoilboard (the stock's bottom)".to_string(),
+            (ZZero::Top, Some(p)) => format!(
+                "set Z0 on the pad's top at X{:.1} Y{:.1} (the stock top)",
+                p.0 + shift.x,
+                p.1 + shift.y
+            ),
+            (ZZero::Top, None) => "set Z0 on the stock top again".to_string(),
+        };
+        for op in ops {
+            op.zero = match (self.z_zero, op.title) {
+                (ZZero::Top, "cutout") => "set Z0 on the stock top beside the panel".into(),
+                _ => zero.clone(),
+            };
+        }
+        match self.z_zero {
+            ZZero::Top => 0.0,
+            ZZero::Bottom => plan.stock.2,
+        }
+    }
+
+    /// The notes every file's header carries: the job's, and the pad.
+    fn header_notes(
+        &self,
+        notes: &[String],
+        plan: &layout::Plan,
+        pad: Option<(f64, f64, f64)>,
+    ) -> Vec<String> {
+        let mut header_notes = notes.to_vec();
+        if let Some(p) = pad {
+            header_notes.push(format!(
+                "touch-off pad: {:.0} mm square at X{:.1} Y{:.1}, left at the stock top by roughing, cut last",
+                p.2,
+                p.0 + plan.shift.x,
+                p.1 + plan.shift.y
+            ));
+        }
+        header_notes
+    }
+
+    /// The files: one job, a split job (roughing in its own file), or one
+    /// job per tile; each with its own frame and header notes.
+    #[allow(clippy::too_many_arguments)]
+    fn job_files(
+        &self,
+        mut ops: Vec<Op>,
+        n_rough: usize,
+        relief: &Relief,
+        plan: &layout::Plan,
+        finish_cell: (&Tool, f64),
+        header_notes: &[String],
+        z_shift: f64,
+        rough_out: std::path::PathBuf,
+    ) -> Result<Vec<JobFile>> {
+        let one = |ops| {
+            (
+                self.output.clone(),
+                ops,
+                plan.clone(),
+                header_notes.to_vec(),
+            )
+        };
+        Ok(match self.layout.tile {
+            Some(size) => {
+                self.tiled(ops, relief, plan, size, finish_cell, header_notes, z_shift)?
+            }
+            None if self.split && n_rough > 0 => {
+                let rest = ops.split_off(n_rough);
+                vec![
+                    (rough_out, ops, plan.clone(), header_notes.to_vec()),
+                    one(rest),
+                ]
+            }
+            None => vec![one(ops)],
+        })
+    }
+
+    /// Every file emitted as G-code, read back as a program, checked
+    /// against the machine's travel and placed in the one job's frame.
+    fn emit_files(
+        &self,
+        files: &[JobFile],
+        relief: &Relief,
+        plan: &layout::Plan,
+        m: &Machine,
+        z_shift: f64,
+        t: &mut crate::timing::Timings,
+    ) -> Result<Emitted> {
+        let mut texts = Vec::new();
+        let mut op_starts = Vec::new();
+        for (file, group, fplan, fnotes) in files {
+            let (text, starts) = t.time("g-code", || {
+                self.emit(group, relief, fplan, m, z_shift, fnotes)
+            });
+            texts.push((file.clone(), text));
+            op_starts.push(starts);
+        }
+        let progs: Vec<crate::gcode::Program> = texts
+            .iter()
+            .map(|(_, text)| crate::gcode::program(text))
+            .collect::<Result<_>>()?;
+        for ((file, _), prog) in texts.iter().zip(&progs) {
+            judge::fits_travel(prog, m, file)?;
+        }
+        let progs = progs
+            .iter()
+            .zip(files)
+            .map(|(p, f)| p.moved(plan.shift - f.2.shift))
+            .collect();
+        Ok(Emitted {
+            texts,
+            progs,
+            op_starts,
+        })
+    }
+
+    /// The files written, headed with the judged notes and each file's
+    /// estimate, with the SVG and preview asked for; all or nothing.
+    /// Returns the lines written and the files, the job first.
+    #[allow(clippy::too_many_arguments)]
+    fn write(
+        &self,
+        emitted: Emitted,
+        judged: &judge::Judged,
+        relief: &Relief,
+        plan: &layout::Plan,
+        z_shift: f64,
+        (extra, estimate): (&[String], &dyn Fn(usize) -> String),
+        t: &mut crate::timing::Timings,
+    ) -> Result<(usize, Vec<std::path::PathBuf>)> {
         let mut out = Outputs::default();
-        let (mut lines, mut time_s) = (0, 0.0);
+        let mut lines = 0;
         let mut written = Vec::new();
-        for (k, (file, text)) in texts.into_iter().enumerate() {
-            time_s += times[k];
-            let mut text = with_comments(text, &extra);
+        for (k, (file, text)) in emitted.texts.into_iter().enumerate() {
+            let mut text = with_comments(text, extra);
             text = with_comments(text, &[estimate(k)]);
             // counted as written: a wrapped comment takes several lines
             lines += text.lines().count();
@@ -284,34 +303,21 @@ impl ToolpathJob {
             written.rotate_right(1);
         }
         if let Some(svg) = &self.svg {
-            let doc = t.time("svg", || view::top_view(&progs, relief, plan, z_shift));
+            let doc = t.time("svg", || {
+                view::top_view(&emitted.progs, relief, plan, z_shift)
+            });
             out.add(svg, doc.into_bytes());
             written.push(svg.clone());
         }
         if let Some(pv) = &self.preview {
             let png = t.time("preview", || {
-                view::simulated_preview(&judged, relief, self.light)
+                view::simulated_preview(judged, relief, self.light)
             });
             out.add(pv, png?);
             written.push(pv.clone());
         }
         t.time("write", || out.commit())?;
-        let (rapid_mm, cut_mm) = judge::travel(&progs);
-        Ok(CamSummary {
-            lines,
-            raw_points,
-            time_s,
-            time_by_op: total_shares(parts.into_iter().flatten()),
-            stepover_mm: step,
-            written,
-            notes,
-            engagement: judged.engagement,
-            residual: judged.residual,
-            gouge: judged.gouge,
-            rapid_mm,
-            cut_mm,
-            timings: t,
-        })
+        Ok((lines, written))
     }
 
     /// The job's ops cut into tiles of at most `size` (row by row from the
@@ -527,6 +533,117 @@ impl ToolpathJob {
     }
 }
 
+/// Refuse the job at its first cut deeper than its tool may take, with
+/// what to do about it.
+fn refuse_too_deep(
+    judged: &judge::Judged,
+    emitted: &Emitted,
+    files: &[JobFile],
+    limits: &super::setup::Limits,
+    rough_tool: Option<Tool>,
+) -> Result<()> {
+    let Some((k, o)) = judge::first_over(judged, &emitted.progs, &|tl| limits.of(tl)) else {
+        return Ok(());
+    };
+    let what = format!(
+        "{}line {}: {} cuts {:.3} mm deep{} (allowed {:.3} mm in {})",
+        if files.len() > 1 {
+            format!("{}, ", files[k].0.display())
+        } else {
+            String::new()
+        },
+        o.line,
+        o.tool.spec(),
+        o.depth,
+        if o.slotting { " at full width" } else { "" },
+        o.limit,
+        limits.name
+    );
+    // the op the line belongs to: the last that starts before it
+    let op = emitted.op_starts[k]
+        .iter()
+        .rposition(|&s| s < o.line)
+        .unwrap_or(0);
+    let roughing = files[k].1[op].title == "roughing";
+    let advice = match rough_tool {
+        // roughing is there: the spot is one it cannot reach (a channel or
+        // corner narrower than its tool) and the finishing tool's own
+        // layers cannot be entered
+        Some(rt) if !roughing => format!(
+            "{} cannot reach there, nor can the finishing tool's layers be entered: \
+             rough with a smaller tool (--rough flat:D), or pass --allow-deep-cuts",
+            rt.spec()
+        ),
+        Some(_) => "lower --step-down, or pass --allow-deep-cuts".into(),
+        None => "rough first (--rough), lower --step-down, or pass --allow-deep-cuts".into(),
+    };
+    bail!("{what}: {advice}");
+}
+
+/// With --allow-deep-cuts, the note naming the first cut deeper than the
+/// material allows, its line number counted after the header grows by
+/// `extra` and the note itself.
+fn deep_cuts_note(
+    judged: &judge::Judged,
+    progs: &[crate::gcode::Program],
+    limits: &super::setup::Limits,
+    extra: &[String],
+    added: &dyn Fn(&[String], usize) -> usize,
+) -> Option<String> {
+    let (k, o) = judge::first_over(judged, progs, &|tl| limits.material_of(tl))?;
+    let note = |by: usize| {
+        format!(
+            "--allow-deep-cuts: line {} cuts {:.3} mm deep with {} (limit {:.3} mm)",
+            o.line + by,
+            o.depth,
+            o.tool.spec(),
+            o.limit
+        )
+    };
+    // the note's own lines count: settle the number twice
+    let mut by = added(extra, k);
+    for _ in 0..2 {
+        let with: Vec<String> = extra.iter().cloned().chain([note(by)]).collect();
+        by = added(&with, k);
+    }
+    Some(note(by))
+}
+
+/// Each file's estimate on the machine, by op.
+fn file_times(emitted: &Emitted, files: &[JobFile], m: &Machine) -> Times {
+    let parts: Vec<Vec<(String, f64)>> = emitted
+        .progs
+        .iter()
+        .zip(&emitted.op_starts)
+        .zip(files)
+        .map(|((p, starts), f)| {
+            let secs = sim::time_by_part(p, m, starts);
+            op_shares(f.1.iter().map(|o| (o.title, &o.tool)), &secs)
+        })
+        .collect();
+    let times = parts
+        .iter()
+        .map(|ps| ps.iter().map(|p| p.1).sum())
+        .collect();
+    Times { parts, times }
+}
+
+impl Times {
+    /// File `k`'s estimate as its header says it.
+    fn estimate(&self, k: usize, m: &Machine) -> String {
+        let split = if self.parts[k].len() > 1 {
+            format!(": {}", sim::shares_text(&self.parts[k]))
+        } else {
+            String::new()
+        };
+        format!(
+            "estimated time: {} on {}{split}",
+            sim::hms(self.times[k]),
+            m.name
+        )
+    }
+}
+
 /// When a small finishing tool's own layers take over half the job: how
 /// long, and the usual faster plan (the largest ball in the tool table up
 /// to 1/4 in finishes, the small tool follows as a rest tool). On the
@@ -542,7 +659,7 @@ fn layers_advice(
     let layers: f64 = parts
         .iter()
         .flatten()
-        .filter(|p| p.0.starts_with(super::LAYERS))
+        .filter(|p| p.0.starts_with(LAYERS))
         .map(|p| p.1)
         .sum();
     if layers <= 0.5 * total {

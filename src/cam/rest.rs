@@ -4,6 +4,7 @@
 //! from the geometry.
 
 use super::stock::Planned;
+use crate::error::Result;
 use crate::grid::Grid;
 use crate::relief::Relief;
 use crate::sim::Stock;
@@ -106,4 +107,102 @@ pub fn linked(
         out.push(p);
     }
     out
+}
+
+impl super::ToolpathJob {
+    /// The rest stage: the rest tool in layers where the planned stock
+    /// holds more than it may cut at once, then a raster at its finishing
+    /// stepover, then pencil passes along the creases, all only near where
+    /// the tools before it left more than the threshold (the rows on
+    /// either side of such a place both come in). None (and a note) where
+    /// nothing is left, or no rest tool is asked for.
+    pub(super) fn rest_stage(&self, w: &mut super::setup::Work) -> Result<Option<super::Op>> {
+        use super::{order, Op, Stepover};
+        use crate::toolpath::Pass;
+        let (Some(r), Some(rt)) = (&self.rest, w.rest_tool) else {
+            return Ok(None);
+        };
+        let mut t = std::mem::take(&mut w.t);
+        let op = t.time("rest", || -> Result<Option<Op>> {
+            let settings = self.settings(&w.machine, &rt, w.material.as_ref(), &mut w.notes)?;
+            let step = w
+                .material
+                .as_ref()
+                .and_then(|mt| mt.cutting_for(rt.working_diameter()))
+                .map(|c| Stepover::Percent(c.finish_stepover))
+                .or(self.stepover.filter(|s| matches!(s, Stepover::Percent(_))))
+                .unwrap_or(Stepover::Percent(10.0))
+                .mm(&rt)?;
+            let pitch = w.planned.stock.pitch;
+            let left = Unfinished::find(&w.planned, &w.relief, r.threshold, step + pitch);
+            if left.share() == 0.0 {
+                w.notes.push(format!(
+                    "--rest {}: nothing left over {} mm; no rest pass",
+                    rt.spec(),
+                    r.threshold
+                ));
+                return Ok(None);
+            }
+            let subject = w.subject.as_ref();
+            let keep = |x: f64, y: f64| left.near(x, y) && subject.is_none_or(|s| s.is_near(x, y));
+            let (hf, panel, floor) = (&w.hf, w.panel, w.floor);
+            let mut passes = Vec::new();
+            if let Some((layers, depth)) = self.rest_layers(
+                hf,
+                &rt,
+                &w.planned,
+                panel,
+                floor,
+                w.limits.layer(&rt),
+                &settings,
+                Some(&keep),
+            ) {
+                w.raw_points += layers.iter().map(|p| p.pts.len()).sum::<usize>();
+                w.notes.push(format!(
+                    "{} steps down in layers of {depth:.2} mm where more is left than it may cut",
+                    rt.spec()
+                ));
+                passes.extend(w.planned.ramp_and_cut(layers, rt, false));
+            }
+            let (rows, raw) = self.raster(hf, &rt, panel, floor, step, Some(&keep));
+            w.raw_points += raw;
+            let rows = order::tour(rows, None);
+            let rows = linked(hf, &rt, rows, floor, self.tolerance, rt.working_diameter());
+            let rows = rows
+                .into_iter()
+                .map(|pts| Pass {
+                    pts,
+                    clear_z: settings.safe_z,
+                })
+                .collect();
+            passes.extend(w.planned.ramp_and_cut(rows, rt, true));
+            // pencil passes last, one clean line along each crease: valleys
+            // of the rest tool's CL surface sharper than the finishing tool
+            // fits into
+            let kappa = 1.0 / (w.tool.radius() - rt.radius()).max(rt.radius());
+            let start = passes.last().and_then(|p: &Pass| p.pts.last().copied());
+            let (pencil, raw) =
+                self.pencil(hf, &rt, panel, floor, kappa, &keep, start, settings.safe_z);
+            let n_pencil = pencil.len();
+            w.raw_points += raw;
+            passes.extend(w.planned.ramp_and_cut(pencil, rt, true));
+            let what = format!(
+                "rest machining where more than {} mm was left ({:.1}% of the stock), raster, \
+                 stepover {step:.4} mm, then {n_pencil} pencil passes along creases",
+                r.threshold,
+                100.0 * left.share()
+            );
+            w.notes.push(format!("{}: {what}", rt.spec()));
+            Ok(Some(Op {
+                title: "rest",
+                tool: rt,
+                zero: String::new(),
+                settings,
+                strategy: what,
+                passes,
+            }))
+        });
+        w.t = t;
+        op
+    }
 }

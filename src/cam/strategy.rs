@@ -1,5 +1,6 @@
-//! The finishing tool's passes: raster rows, waterlines, and its own
-//! layers where more is left than it may cut at once.
+//! The strategies' passes over a region: raster rows, waterlines, pencil
+//! passes along valleys, a tool's own layers where more is left than it
+//! may cut at once, each merged and checked against the exact tool.
 
 use super::{order, stock, tile, Direction, Finish, ToolpathJob};
 use crate::gcode::emit::Settings;
@@ -11,6 +12,18 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 impl ToolpathJob {
+    /// Passes cleaned for the machine: merged within the tolerance, then
+    /// every move checked exactly.
+    pub(super) fn checked(&self, hf: &HeightField, tool: &Tool, passes: Vec<Pass>) -> Vec<Pass> {
+        passes
+            .into_iter()
+            .map(|p| Pass {
+                pts: path::verify(hf, tool, &merge::merge(&p.pts, self.tolerance), false),
+                clear_z: p.clear_z,
+            })
+            .collect()
+    }
+
     /// The finishing tool in layers over `region` wherever the planned
     /// stock holds more above the relief than it may cut at once (`most`);
     /// None where nothing is. Returns the passes and the layer depth.
