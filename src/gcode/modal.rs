@@ -131,8 +131,9 @@ const M_SPINDLE: u32 = 1 << 12;
 const M_COOLANT: u32 = 1 << 13;
 
 /// What claims the block's axis words.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 enum AxisCommand {
+    #[default]
     None,
     NonModal,
     Motion,
@@ -209,183 +210,21 @@ impl Modal {
         Ok(step)
     }
 
-    /// GRBL's gc_execute_line on a copy of the state (`self`), `old`
-    /// being the state before the line.
+    /// GRBL's gc_execute_line on a copy of the state (`self`): the words
+    /// read (step 2), the block checked (step 3), then executed (step 4).
     fn fold(&mut self, l: &Line, jog: bool) -> Result<Step, Refusal> {
         let old = self.clone();
         let mut step = Step {
             from: old.pos,
             ..Step::default()
         };
-        // step 2: the words, in order
-        let mut groups = 0u32;
-        let mut seen = 0u32;
-        let mut val = [0.0f64; 26];
-        let mut axis_command = AxisCommand::None;
-        let mut non_modal: Option<u16> = None;
-        let mut flow: Option<u8> = None;
-        let mut tool_length: Option<bool> = None;
         if jog {
             self.motion = 1;
             self.inverse_time = false;
         }
-        let claim = |cmd: &mut AxisCommand, to: AxisCommand| {
-            if *cmd != AxisCommand::None {
-                return refuse(24, "two commands in the block use the axis words");
-            }
-            *cmd = to;
-            Ok(())
-        };
+        let mut b = Block::default();
         for &(c, value) in &l.words {
-            let int = value.trunc();
-            let mut mantissa = (100.0 * (value - int)).round() as i64;
-            let int = int as i64;
-            match c {
-                'G' => {
-                    let group = match int {
-                        4 | 10 | 28 | 30 | 53 | 92 => {
-                            if matches!(int, 10 | 28 | 30 | 92) && mantissa == 0 {
-                                claim(&mut axis_command, AxisCommand::NonModal)?;
-                            }
-                            let mut code = int as u16;
-                            if matches!(int, 28 | 30 | 92) {
-                                if mantissa != 0 && mantissa != 10 {
-                                    return refuse(20, format!("unsupported command G{value}"));
-                                }
-                                code += mantissa as u16;
-                                mantissa = 0;
-                            }
-                            non_modal = Some(code);
-                            G_NON_MODAL
-                        }
-                        0..=3 | 38 => {
-                            claim(&mut axis_command, AxisCommand::Motion)?;
-                            self.motion = int as u8;
-                            if int == 38 {
-                                if !matches!(mantissa, 20 | 30 | 40 | 50) {
-                                    return refuse(20, format!("unsupported probe G{value}"));
-                                }
-                                self.motion = PROBE_TOWARD + (mantissa / 10 - 2) as u8;
-                                mantissa = 0;
-                            }
-                            G_MOTION
-                        }
-                        80 => {
-                            self.motion = NO_MOTION;
-                            G_MOTION
-                        }
-                        17..=19 => {
-                            self.plane = [Plane::Xy, Plane::Zx, Plane::Yz][(int - 17) as usize];
-                            G_PLANE
-                        }
-                        90 | 91 if mantissa == 0 => {
-                            self.absolute = int == 90;
-                            G_DISTANCE
-                        }
-                        90 | 91 => {
-                            // G91.1 (arc centres incremental, as always)
-                            if mantissa != 10 || int == 90 {
-                                return refuse(20, format!("unsupported command G{value}"));
-                            }
-                            mantissa = 0;
-                            G_ARC_DISTANCE
-                        }
-                        93 | 94 => {
-                            self.inverse_time = int == 93;
-                            G_FEED_MODE
-                        }
-                        20 | 21 => {
-                            self.inches = int == 20;
-                            G_UNITS
-                        }
-                        40 => G_CUTTER,
-                        43 | 49 => {
-                            claim(&mut axis_command, AxisCommand::ToolLength)?;
-                            if int == 49 {
-                                tool_length = Some(false);
-                            } else if mantissa == 10 {
-                                tool_length = Some(true);
-                            } else {
-                                return refuse(20, format!("unsupported command G{value}"));
-                            }
-                            mantissa = 0;
-                            G_TOOL_LENGTH
-                        }
-                        54..=59 => {
-                            self.coord = (int - 54) as usize;
-                            G_COORD
-                        }
-                        61 => {
-                            if mantissa != 0 {
-                                return refuse(20, format!("unsupported command G{value}"));
-                            }
-                            G_PATH
-                        }
-                        _ => return refuse(20, format!("unsupported command G{value}")),
-                    };
-                    if mantissa > 0 {
-                        return refuse(23, format!("G{value} needs an integer"));
-                    }
-                    if groups & group != 0 {
-                        return refuse(21, format!("G{value}: two commands of one modal group"));
-                    }
-                    groups |= group;
-                }
-                'M' => {
-                    if mantissa > 0 {
-                        return refuse(23, format!("M{value} needs an integer"));
-                    }
-                    let group = match int {
-                        0 | 1 | 2 | 30 => {
-                            // M1, the optional stop, is ignored
-                            if int != 1 {
-                                flow = Some(int as u8);
-                            }
-                            M_FLOW
-                        }
-                        3 | 4 => {
-                            self.spindle = Some(int as u8);
-                            M_SPINDLE
-                        }
-                        5 => {
-                            self.spindle = None;
-                            M_SPINDLE
-                        }
-                        // M7 (mist) is not in GRBL's default build
-                        8 => {
-                            self.coolant.1 = true;
-                            M_COOLANT
-                        }
-                        9 => {
-                            self.coolant = (false, false);
-                            M_COOLANT
-                        }
-                        _ => return refuse(20, format!("unsupported command M{value}")),
-                    };
-                    if groups & group != 0 {
-                        return refuse(21, format!("M{value}: two commands of one modal group"));
-                    }
-                    groups |= group;
-                }
-                c if VALUE_WORDS.contains(c) => {
-                    if c == 'T' && value > MAX_TOOL_NUMBER {
-                        return refuse(38, format!("tool number T{value} exceeds 255"));
-                    }
-                    if seen & bit(c) != 0 {
-                        return refuse(25, format!("word {c} repeated"));
-                    }
-                    if "FNPTS".contains(c) && value < 0.0 {
-                        return refuse(4, format!("negative value {c}{value}"));
-                    }
-                    seen |= bit(c);
-                    val[c as usize - 'A' as usize] = match c {
-                        'L' | 'T' => int as u8 as f64,
-                        'N' => value.trunc(),
-                        _ => value,
-                    };
-                }
-                _ => return refuse(20, format!("unsupported word {c}{value}")),
-            }
+            self.word(&mut b, c, value)?;
         }
         if let Some(code) = l.bad {
             return refuse(
@@ -398,80 +237,278 @@ impl Modal {
             );
         }
         // step 3: check the block
-        let has = |c: char| seen & bit(c) != 0;
-        let v = |c: char| val[c as usize - 'A' as usize];
-        let mut unused = seen;
-        let present = ['X', 'Y', 'Z'].map(has);
-        let axis_words = present.iter().any(|&p| p);
-        if axis_words && axis_command == AxisCommand::None {
-            axis_command = AxisCommand::Motion;
+        b.unused = b.seen;
+        b.present = ['X', 'Y', 'Z'].map(|c| b.has(c));
+        b.axis_words = b.present.iter().any(|&p| p);
+        if b.axis_words && b.axis_command == AxisCommand::None {
+            b.axis_command = AxisCommand::Motion;
         }
-        if has('N') && v('N') > MAX_LINE_NUMBER {
-            return refuse(27, format!("line number N{} too large", v('N')));
+        if b.has('N') && b.v('N') > MAX_LINE_NUMBER {
+            return refuse(27, format!("line number N{} too large", b.v('N')));
         }
         let scale = if self.inches { 25.4 } else { 1.0 };
-        // the feed rate (0 = undefined)
-        let f = if jog {
-            if !has('F') {
+        let f = self.feed_rate(&old, &b, jog, scale)?;
+        let speed = if b.has('S') { b.v('S') } else { old.speed };
+        if b.non_modal == Some(4) {
+            if !b.has('P') {
+                return refuse(28, "G4 needs a P word (seconds)");
+            }
+            b.unused &= !bit('P');
+        }
+        if b.axis_command == AxisCommand::ToolLength
+            && b.tool_length == Some(true)
+            && b.present != [false, false, true]
+        {
+            return refuse(37, "G43.1 takes a Z word only");
+        }
+        let to = self.targets(&old, &mut b, scale)?;
+        self.check_motion(&old, &mut b, &mut step, f, to.target, scale)?;
+        b.check_unused(jog)?;
+        if jog {
+            if b.groups & !(G_DISTANCE | G_UNITS | G_NON_MODAL) != 0
+                || !matches!(b.non_modal, None | Some(53))
+            {
+                return refuse(16, "a jog takes only G20/G21, G90/G91 and G53");
+            }
+            step.jog = true;
+            step.jog_feed = f;
+            if b.axis_command != AxisCommand::None {
+                step.motion = 1;
+                step.to = Some(to.target);
+                self.pos = to.target;
+            }
+            return Ok(step);
+        }
+        self.execute(&old, &b, &to, (f, speed), &mut step);
+        Ok(step)
+    }
+
+    /// One word of the block (step 2), by its letter: a G or M command
+    /// sets its modal group's mode, a value word is kept.
+    fn word(&mut self, b: &mut Block, c: char, value: f64) -> Result<(), Refusal> {
+        let int = value.trunc();
+        let mantissa = (100.0 * (value - int)).round() as i64;
+        let int = int as i64;
+        match c {
+            'G' => {
+                let group = self.g_command(b, int, mantissa, value)?;
+                if b.groups & group != 0 {
+                    return refuse(21, format!("G{value}: two commands of one modal group"));
+                }
+                b.groups |= group;
+            }
+            'M' => {
+                if mantissa > 0 {
+                    return refuse(23, format!("M{value} needs an integer"));
+                }
+                let group = self.m_command(b, int, value)?;
+                if b.groups & group != 0 {
+                    return refuse(21, format!("M{value}: two commands of one modal group"));
+                }
+                b.groups |= group;
+            }
+            c if VALUE_WORDS.contains(c) => {
+                if c == 'T' && value > MAX_TOOL_NUMBER {
+                    return refuse(38, format!("tool number T{value} exceeds 255"));
+                }
+                if b.seen & bit(c) != 0 {
+                    return refuse(25, format!("word {c} repeated"));
+                }
+                if "FNPTS".contains(c) && value < 0.0 {
+                    return refuse(4, format!("negative value {c}{value}"));
+                }
+                b.seen |= bit(c);
+                b.val[c as usize - 'A' as usize] = match c {
+                    'L' | 'T' => int as u8 as f64,
+                    'N' => value.trunc(),
+                    _ => value,
+                };
+            }
+            _ => return refuse(20, format!("unsupported word {c}{value}")),
+        }
+        Ok(())
+    }
+
+    /// A G command: its modal group's bit, the mode set.
+    fn g_command(
+        &mut self,
+        b: &mut Block,
+        int: i64,
+        mut mantissa: i64,
+        value: f64,
+    ) -> Result<u32, Refusal> {
+        let unsupported = || refuse(20, format!("unsupported command G{value}"));
+        let group = match int {
+            4 | 10 | 28 | 30 | 53 | 92 => {
+                if matches!(int, 10 | 28 | 30 | 92) && mantissa == 0 {
+                    b.claim(AxisCommand::NonModal)?;
+                }
+                let mut code = int as u16;
+                if matches!(int, 28 | 30 | 92) {
+                    if mantissa != 0 && mantissa != 10 {
+                        return unsupported();
+                    }
+                    code += mantissa as u16;
+                    mantissa = 0;
+                }
+                b.non_modal = Some(code);
+                G_NON_MODAL
+            }
+            0..=3 | 38 => {
+                b.claim(AxisCommand::Motion)?;
+                self.motion = int as u8;
+                if int == 38 {
+                    if !matches!(mantissa, 20 | 30 | 40 | 50) {
+                        return refuse(20, format!("unsupported probe G{value}"));
+                    }
+                    self.motion = PROBE_TOWARD + (mantissa / 10 - 2) as u8;
+                    mantissa = 0;
+                }
+                G_MOTION
+            }
+            80 => {
+                self.motion = NO_MOTION;
+                G_MOTION
+            }
+            17..=19 => {
+                self.plane = [Plane::Xy, Plane::Zx, Plane::Yz][(int - 17) as usize];
+                G_PLANE
+            }
+            90 | 91 if mantissa == 0 => {
+                self.absolute = int == 90;
+                G_DISTANCE
+            }
+            90 | 91 => {
+                // G91.1 (arc centres incremental, as always)
+                if mantissa != 10 || int == 90 {
+                    return unsupported();
+                }
+                mantissa = 0;
+                G_ARC_DISTANCE
+            }
+            93 | 94 => {
+                self.inverse_time = int == 93;
+                G_FEED_MODE
+            }
+            20 | 21 => {
+                self.inches = int == 20;
+                G_UNITS
+            }
+            40 => G_CUTTER,
+            43 | 49 => {
+                b.claim(AxisCommand::ToolLength)?;
+                if int == 49 {
+                    b.tool_length = Some(false);
+                } else if mantissa == 10 {
+                    b.tool_length = Some(true);
+                } else {
+                    return unsupported();
+                }
+                mantissa = 0;
+                G_TOOL_LENGTH
+            }
+            54..=59 => {
+                self.coord = (int - 54) as usize;
+                G_COORD
+            }
+            61 => {
+                if mantissa != 0 {
+                    return unsupported();
+                }
+                G_PATH
+            }
+            _ => return unsupported(),
+        };
+        if mantissa > 0 {
+            return refuse(23, format!("G{value} needs an integer"));
+        }
+        Ok(group)
+    }
+
+    /// An M command: its modal group's bit, the mode set.
+    fn m_command(&mut self, b: &mut Block, int: i64, value: f64) -> Result<u32, Refusal> {
+        Ok(match int {
+            0 | 1 | 2 | 30 => {
+                // M1, the optional stop, is ignored
+                if int != 1 {
+                    b.flow = Some(int as u8);
+                }
+                M_FLOW
+            }
+            3 | 4 => {
+                self.spindle = Some(int as u8);
+                M_SPINDLE
+            }
+            5 => {
+                self.spindle = None;
+                M_SPINDLE
+            }
+            // M7 (mist) is not in GRBL's default build
+            8 => {
+                self.coolant.1 = true;
+                M_COOLANT
+            }
+            9 => {
+                self.coolant = (false, false);
+                M_COOLANT
+            }
+            _ => return refuse(20, format!("unsupported command M{value}")),
+        })
+    }
+
+    /// The block's feed rate, mm/min or 1/min in G93 (0 = undefined).
+    fn feed_rate(&self, old: &Modal, b: &Block, jog: bool, scale: f64) -> Result<f64, Refusal> {
+        Ok(if jog {
+            if !b.has('F') {
                 return refuse(22, "a jog needs its F word");
             }
-            v('F') * scale
+            b.v('F') * scale
         } else if self.inverse_time {
-            if axis_command == AxisCommand::Motion
+            if b.axis_command == AxisCommand::Motion
                 && self.motion != NO_MOTION
                 && self.motion != 0
-                && !has('F')
+                && !b.has('F')
             {
                 return refuse(22, "G93 needs an F word on every feed move");
             }
-            v('F')
+            b.v('F')
         } else if !old.inverse_time {
-            if has('F') {
-                v('F') * scale
+            if b.has('F') {
+                b.v('F') * scale
             } else {
                 old.feed.unwrap_or(0.0)
             }
         } else {
             // (GRBL takes F as given when leaving G93)
-            v('F')
-        };
-        let speed = if has('S') { v('S') } else { old.speed };
-        if non_modal == Some(4) {
-            if !has('P') {
-                return refuse(28, "G4 needs a P word (seconds)");
-            }
-            unused &= !bit('P');
-        }
-        let (a0, a1, _) = self.plane.axes();
-        let mut xyz = ['X', 'Y', 'Z'].map(|c| v(c) * scale);
-        if axis_command == AxisCommand::ToolLength
-            && tool_length == Some(true)
-            && present != [false, false, true]
-        {
-            return refuse(37, "G43.1 takes a Z word only");
-        }
+            b.v('F')
+        })
+    }
+
+    /// The non-modal commands' data (G10, G92, G28/G30) and the block's
+    /// target in machine coordinates.
+    fn targets(&self, old: &Modal, b: &mut Block, scale: f64) -> Result<Targets, Refusal> {
+        let mut xyz = ['X', 'Y', 'Z'].map(|c| b.v(c) * scale);
+        let present = b.present;
         let block_coord = self.stored.wcs[self.coord];
         let tlo = DVec3::new(0.0, 0.0, old.tlo);
-        let mut g10: Option<(usize, DVec3)> = None;
-        let mut g92: Option<DVec3> = None;
-        let mut home: Option<DVec3> = None;
-        match non_modal {
+        let mut to = Targets::default();
+        match b.non_modal {
             Some(10) => {
-                if !axis_words {
+                if !b.axis_words {
                     return refuse(26, "G10 without axis words");
                 }
-                if !has('P') && !has('L') {
+                if !b.has('P') && !b.has('L') {
                     return refuse(28, "G10 needs L and P words");
                 }
-                let p = v('P').trunc();
+                let p = b.v('P').trunc();
                 if p > N_COORD_SYSTEMS {
                     return refuse(29, format!("no coordinate system P{p}"));
                 }
-                let l20 = v('L') == 20.0;
-                if !l20 && (v('L') != 2.0 || has('R')) {
-                    return refuse(20, format!("unsupported G10 L{}", v('L')));
+                let l20 = b.v('L') == 20.0;
+                if !l20 && (b.v('L') != 2.0 || b.has('R')) {
+                    return refuse(20, format!("unsupported G10 L{}", b.v('L')));
                 }
-                unused &= !(bit('L') | bit('P'));
+                b.unused &= !(bit('L') | bit('P'));
                 let idx = if p > 0.0 { p as usize - 1 } else { self.coord };
                 let mut data = self.stored.wcs[idx];
                 for k in (0..3).filter(|&k| present[k]) {
@@ -481,24 +518,24 @@ impl Modal {
                         xyz[k]
                     };
                 }
-                g10 = Some((idx, data));
+                to.g10 = Some((idx, data));
             }
             Some(92) => {
-                if !axis_words {
+                if !b.axis_words {
                     return refuse(26, "G92 without axis words");
                 }
                 let mut o = old.g92;
                 for k in (0..3).filter(|&k| present[k]) {
                     o[k] = old.pos[k] - block_coord[k] - xyz[k] - tlo[k];
                 }
-                g92 = Some(o);
+                to.g92 = Some(o);
             }
             _ => {
-                if axis_command != AxisCommand::ToolLength && axis_words {
+                if b.axis_command != AxisCommand::ToolLength && b.axis_words {
                     for k in 0..3 {
                         xyz[k] = if !present[k] {
                             old.pos[k]
-                        } else if non_modal == Some(53) {
+                        } else if b.non_modal == Some(53) {
                             xyz[k]
                         } else if self.absolute {
                             xyz[k] + block_coord[k] + old.g92[k] + tlo[k]
@@ -507,21 +544,21 @@ impl Modal {
                         };
                     }
                 }
-                match non_modal {
+                match b.non_modal {
                     Some(28) | Some(30) => {
-                        let mut h = if non_modal == Some(28) {
+                        let mut h = if b.non_modal == Some(28) {
                             self.stored.g28
                         } else {
                             self.stored.g30
                         };
-                        if axis_words {
+                        if b.axis_words {
                             for k in (0..3).filter(|&k| !present[k]) {
                                 h[k] = old.pos[k];
                             }
                         } else {
-                            axis_command = AxisCommand::None;
+                            b.axis_command = AxisCommand::None;
                         }
-                        home = Some(h);
+                        to.home = Some(h);
                     }
                     Some(53) if self.motion != 0 && self.motion != 1 => {
                         return refuse(30, "G53 needs G0 or G1");
@@ -530,123 +567,115 @@ impl Modal {
                 }
             }
         }
-        let target = DVec3::from_array(xyz);
-        // the motion modes
+        to.xyz = xyz;
+        to.target = DVec3::from_array(xyz);
+        Ok(to)
+    }
+
+    /// The motion mode's checks: a feed for feed moves, an arc's geometry,
+    /// a probe's target.
+    fn check_motion(
+        &self,
+        old: &Modal,
+        b: &mut Block,
+        step: &mut Step,
+        f: f64,
+        target: DVec3,
+        scale: f64,
+    ) -> Result<(), Refusal> {
         if self.motion == NO_MOTION {
-            if axis_words {
+            if b.axis_words {
                 return refuse(31, "axis words with no motion mode (after G80)");
             }
-        } else if axis_command == AxisCommand::Motion {
-            if self.motion == 0 {
-                if !axis_words {
-                    axis_command = AxisCommand::None;
+            return Ok(());
+        }
+        if b.axis_command != AxisCommand::Motion {
+            return Ok(());
+        }
+        if self.motion == 0 {
+            if !b.axis_words {
+                b.axis_command = AxisCommand::None;
+            }
+            return Ok(());
+        }
+        if f == 0.0 {
+            return refuse(22, "feed move with no feed rate set (F)");
+        }
+        match self.motion {
+            1 if !b.axis_words => b.axis_command = AxisCommand::None,
+            2 | 3 => {
+                if !b.axis_words {
+                    return refuse(26, "arc without an end point");
                 }
-            } else {
-                if f == 0.0 {
-                    return refuse(22, "feed move with no feed rate set (F)");
-                }
-                match self.motion {
-                    1 if !axis_words => axis_command = AxisCommand::None,
-                    2 | 3 => {
-                        if !axis_words {
-                            return refuse(26, "arc without an end point");
-                        }
-                        let r = has('R').then(|| v('R') * scale);
-                        let ijk = if r.is_some() {
-                            unused &= !bit('R');
-                            [None; 3]
-                        } else {
-                            unused &= !(bit('I') | bit('J') | bit('K'));
-                            ['I', 'J', 'K'].map(|c| has(c).then(|| v(c) * scale))
-                        };
-                        let in_plane = present[a0] || present[a1];
-                        match arc::setup(
-                            self.plane,
-                            self.motion == 2,
-                            old.pos,
-                            target,
-                            ijk,
-                            r,
-                            in_plane,
-                        ) {
-                            Ok(a) => step.arc = Some(a),
-                            Err((code, what)) => return refuse(code, what),
-                        }
-                    }
-                    m if m >= PROBE_TOWARD => {
-                        if !axis_words {
-                            return refuse(26, "a probe without axis words");
-                        }
-                        if target == old.pos {
-                            return refuse(33, "a probe to where the tool is");
-                        }
-                        let k = m - PROBE_TOWARD;
-                        step.probe = Some(Probe {
-                            away: k >= 2,
-                            must_touch: k.is_multiple_of(2),
-                        });
-                        // GRBL runs a probe alone, after the moves before
-                        // it, and answers when it has ended
-                        step.sync = true;
-                    }
-                    _ => {}
+                let r = b.has('R').then(|| b.v('R') * scale);
+                let ijk = if r.is_some() {
+                    b.unused &= !bit('R');
+                    [None; 3]
+                } else {
+                    b.unused &= !(bit('I') | bit('J') | bit('K'));
+                    ['I', 'J', 'K'].map(|c| b.has(c).then(|| b.v(c) * scale))
+                };
+                let (a0, a1, _) = self.plane.axes();
+                let in_plane = b.present[a0] || b.present[a1];
+                let cw = self.motion == 2;
+                match arc::setup(self.plane, cw, old.pos, target, ijk, r, in_plane) {
+                    Ok(a) => step.arc = Some(a),
+                    Err((code, what)) => return refuse(code, what),
                 }
             }
-        }
-        // words nothing used
-        unused &= !(bit('N') | bit('F'));
-        if !jog {
-            unused &= !(bit('S') | bit('T'));
-        }
-        if axis_command != AxisCommand::None {
-            unused &= !(bit('X') | bit('Y') | bit('Z'));
-        }
-        if unused != 0 {
-            let words: String = VALUE_WORDS
-                .chars()
-                .filter(|&c| unused & bit(c) != 0)
-                .collect();
-            return refuse(36, format!("words {words} unused"));
-        }
-        if jog {
-            if groups & !(G_DISTANCE | G_UNITS | G_NON_MODAL) != 0
-                || !matches!(non_modal, None | Some(53))
-            {
-                return refuse(16, "a jog takes only G20/G21, G90/G91 and G53");
+            m if m >= PROBE_TOWARD => {
+                if !b.axis_words {
+                    return refuse(26, "a probe without axis words");
+                }
+                if target == old.pos {
+                    return refuse(33, "a probe to where the tool is");
+                }
+                let k = m - PROBE_TOWARD;
+                step.probe = Some(Probe {
+                    away: k >= 2,
+                    must_touch: k.is_multiple_of(2),
+                });
+                // GRBL runs a probe alone, after the moves before it, and
+                // answers when it has ended
+                step.sync = true;
             }
-            step.jog = true;
-            step.jog_feed = f;
-            if axis_command != AxisCommand::None {
-                step.motion = 1;
-                step.to = Some(target);
-                self.pos = target;
-            }
-            return Ok(step);
+            _ => {}
         }
-        // step 4: execute, in GRBL's order
+        Ok(())
+    }
+
+    /// Step 4: the checked block executed in GRBL's order.
+    fn execute(
+        &mut self,
+        old: &Modal,
+        b: &Block,
+        to: &Targets,
+        (f, speed): (f64, f64),
+        step: &mut Step,
+    ) {
         self.feed = (f > 0.0).then_some(f);
         if speed != old.speed {
             step.sync |= old.spindle.is_some();
             self.speed = speed;
         }
-        self.tool = if has('T') { v('T') as u32 } else { 0 };
+        self.tool = if b.has('T') { b.v('T') as u32 } else { 0 };
         step.sync |= self.spindle != old.spindle || self.coolant != old.coolant;
-        if non_modal == Some(4) {
-            step.dwell = Some(v('P'));
+        if b.non_modal == Some(4) {
+            step.dwell = Some(b.v('P'));
             step.sync = true;
         }
-        if let Some(on) = tool_length {
+        if let Some(on) = b.tool_length {
             self.tlo_on = on;
-            self.tlo = if on { xyz[2] } else { 0.0 };
+            self.tlo = if on { to.xyz[2] } else { 0.0 };
         }
-        if let Some((idx, data)) = g10 {
+        if let Some((idx, data)) = to.g10 {
             self.stored.wcs[idx] = data;
         }
-        match non_modal {
+        match b.non_modal {
             Some(28) | Some(30) => {
-                let h = home.unwrap_or(old.pos);
-                if axis_command != AxisCommand::None {
-                    step.via = Some(target);
+                let h = to.home.unwrap_or(old.pos);
+                if b.axis_command != AxisCommand::None {
+                    step.via = Some(to.target);
                 }
                 step.motion = 0;
                 step.to = Some(h);
@@ -654,17 +683,17 @@ impl Modal {
             }
             Some(38) => self.stored.g28 = old.pos,
             Some(40) => self.stored.g30 = old.pos,
-            Some(92) => self.g92 = g92.unwrap_or(old.g92),
+            Some(92) => self.g92 = to.g92.unwrap_or(old.g92),
             Some(102) => self.g92 = DVec3::ZERO,
             _ => {}
         }
-        if self.motion != NO_MOTION && axis_command == AxisCommand::Motion {
+        if self.motion != NO_MOTION && b.axis_command == AxisCommand::Motion {
             step.motion = self.motion;
-            step.to = Some(target);
+            step.to = Some(to.target);
             step.relative = !self.absolute;
-            self.pos = target;
+            self.pos = to.target;
         }
-        match flow {
+        match b.flow {
             Some(0) => {
                 step.pause = true;
                 step.sync = true;
@@ -683,8 +712,74 @@ impl Modal {
             }
             None => {}
         }
-        Ok(step)
     }
+}
+
+/// A block's words as GRBL's parser reads them, and what its checks find.
+#[derive(Default)]
+struct Block {
+    /// Modal groups met, as GRBL's bits.
+    groups: u32,
+    /// Value words met, by letter bit; `unused` those nothing took.
+    seen: u32,
+    unused: u32,
+    val: [f64; 26],
+    axis_command: AxisCommand,
+    non_modal: Option<u16>,
+    flow: Option<u8>,
+    tool_length: Option<bool>,
+    /// X, Y, Z given.
+    present: [bool; 3],
+    axis_words: bool,
+}
+
+impl Block {
+    fn has(&self, c: char) -> bool {
+        self.seen & bit(c) != 0
+    }
+
+    fn v(&self, c: char) -> f64 {
+        self.val[c as usize - 'A' as usize]
+    }
+
+    /// The axis words go to one command only.
+    fn claim(&mut self, to: AxisCommand) -> Result<(), Refusal> {
+        if self.axis_command != AxisCommand::None {
+            return refuse(24, "two commands in the block use the axis words");
+        }
+        self.axis_command = to;
+        Ok(())
+    }
+
+    /// A value word that nothing took is an error.
+    fn check_unused(&mut self, jog: bool) -> Result<(), Refusal> {
+        self.unused &= !(bit('N') | bit('F'));
+        if !jog {
+            self.unused &= !(bit('S') | bit('T'));
+        }
+        if self.axis_command != AxisCommand::None {
+            self.unused &= !(bit('X') | bit('Y') | bit('Z'));
+        }
+        if self.unused != 0 {
+            let words: String = VALUE_WORDS
+                .chars()
+                .filter(|&c| self.unused & bit(c) != 0)
+                .collect();
+            return refuse(36, format!("words {words} unused"));
+        }
+        Ok(())
+    }
+}
+
+/// Where a block goes and what its non-modal command stores.
+#[derive(Default)]
+struct Targets {
+    /// The axis words made machine coordinates (for G43.1, Z as given).
+    xyz: [f64; 3],
+    target: DVec3,
+    g10: Option<(usize, DVec3)>,
+    g92: Option<DVec3>,
+    home: Option<DVec3>,
 }
 
 #[cfg(test)]
