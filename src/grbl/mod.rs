@@ -3,11 +3,15 @@
 //! through and the sender itself.
 
 pub mod job;
+mod lines;
 pub mod port;
+mod replies;
 pub mod resume;
 pub mod sender;
 pub mod sim;
 pub mod state;
+mod stream;
+mod touchoff;
 
 /// GRBL 1.1's meaning of `error:N`.
 pub fn error_meaning(n: u32) -> &'static str {

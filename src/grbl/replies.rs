@@ -1,0 +1,141 @@
+//! What GRBL says, line by line: the welcome, status reports, a command's
+//! replies.
+
+use super::port::Port;
+use super::state::State;
+use super::{SOFT_RESET, STATUS};
+use crate::bail;
+use crate::error::Result;
+use std::collections::VecDeque;
+
+/// Reply lines from the port; bytes GRBL never sends (non-ASCII and
+/// control bytes other than the line end) are line noise and dropped.
+pub struct Replies<'a> {
+    pub port: &'a mut dyn Port,
+    partial: Vec<u8>,
+    ready: VecDeque<String>,
+}
+
+impl<'a> Replies<'a> {
+    pub fn new(port: &'a mut dyn Port) -> Replies<'a> {
+        Replies {
+            port,
+            partial: Vec::new(),
+            ready: VecDeque::new(),
+        }
+    }
+
+    /// The next reply line, waiting up to `timeout` seconds.
+    pub fn next(&mut self, timeout: f64) -> Result<Option<String>> {
+        let until = self.port.now() + timeout;
+        loop {
+            if let Some(l) = self.ready.pop_front() {
+                return Ok(Some(l));
+            }
+            let left = until - self.port.now();
+            if left <= 0.0 {
+                return Ok(None);
+            }
+            for b in self.port.read(left)? {
+                match b {
+                    b'\n' => {
+                        let l = String::from_utf8_lossy(&self.partial).trim().to_string();
+                        self.partial.clear();
+                        if !l.is_empty() {
+                            self.ready.push_back(l);
+                        }
+                    }
+                    0x20..=0x7e => self.partial.push(b),
+                    _ => {} // \r and noise
+                }
+            }
+        }
+    }
+
+    /// Wait for the welcome; soft-reset once if it does not come.
+    pub fn handshake(&mut self, timeout: f64) -> Result<()> {
+        for attempt in 0..2 {
+            if attempt == 1 {
+                self.port.write_all(&[SOFT_RESET])?;
+            }
+            let until = self.port.now() + timeout;
+            while self.port.now() < until {
+                if let Some(l) = self.next(until - self.port.now())? {
+                    if l.starts_with("Grbl ") {
+                        // and whatever follows it at once ([MSG:..]), for
+                        // half a second at most: a chatty device never ends
+                        let t = self.port.now() + 0.5;
+                        while self.port.now() < t && self.next(0.05)?.is_some() {}
+                        return Ok(());
+                    }
+                }
+            }
+        }
+        bail!("no GRBL welcome within {timeout} s, not even after a soft reset")
+    }
+
+    /// A status report (None if none comes within a second).
+    pub fn status(&mut self) -> Result<Option<Status>> {
+        self.port.write_all(&[STATUS])?;
+        let until = self.port.now() + 1.0;
+        while self.port.now() < until {
+            if let Some(l) = self.next(until - self.port.now())? {
+                if let Some(st) = parse_status(&l) {
+                    return Ok(Some(st));
+                }
+            }
+        }
+        Ok(None)
+    }
+
+    /// Send one command and collect its reply lines up to `ok`/`error`.
+    pub fn command(&mut self, cmd: &str, timeout: f64) -> Result<Vec<String>> {
+        self.port.write_all(format!("{cmd}\n").as_bytes())?;
+        let mut got = Vec::new();
+        let until = self.port.now() + timeout;
+        while self.port.now() < until {
+            let Some(l) = self.next(until - self.port.now())? else {
+                continue;
+            };
+            let done = l == "ok" || l.starts_with("error:");
+            got.push(l);
+            if done {
+                return Ok(got);
+            }
+        }
+        bail!("no reply to '{cmd}' within {timeout} s")
+    }
+}
+
+/// A status report: `<State|MPos:x,y,z|Bf:blocks,bytes|...>`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Status {
+    pub state: State,
+    pub pos: [f64; 3],
+    /// Free planner blocks and free receive-buffer bytes.
+    pub free: Option<(usize, usize)>,
+}
+
+/// Parse a status report line.
+pub fn parse_status(l: &str) -> Option<Status> {
+    let body = l.strip_prefix('<')?.strip_suffix('>')?;
+    let mut parts = body.split('|');
+    let state = State::parse(parts.next()?)?;
+    let mut pos = [0.0; 3];
+    let mut bf = None;
+    for p in parts {
+        if let Some(v) = p.strip_prefix("MPos:").or_else(|| p.strip_prefix("WPos:")) {
+            for (k, x) in v.split(',').take(3).enumerate() {
+                pos[k] = x.parse().ok()?;
+            }
+        } else if let Some(v) = p.strip_prefix("Bf:") {
+            let (a, b) = v.split_once(',')?;
+            bf = Some((a.parse().ok()?, b.parse().ok()?));
+        }
+    }
+    Some(Status {
+        state,
+        pos,
+        free: bf,
+    })
+}
