@@ -128,7 +128,31 @@ pub fn oversample_for(tools: &[Tool], pitch: f64, samples: usize) -> usize {
     k
 }
 
+/// The job's files read: each with its name, program and the offset that
+/// moves it into the first file's frame.
+struct Jobs {
+    progs: Vec<(String, gcode::Program, glam::DVec3)>,
+    frame: Option<Frame>,
+    /// The finishing stepover the headers state (the largest).
+    stepover: Option<f64>,
+}
+
+/// What cutting every file found.
+struct Cut {
+    by_moves: sim::MoveGouge,
+    engagement: sim::Engagement,
+    rapids: Vec<usize>,
+    out_of_travel: Vec<usize>,
+    lines: usize,
+    time_s: f64,
+    time_by_tool: Vec<(String, f64)>,
+    last_tool: Option<Tool>,
+}
+
 impl SimulateJob {
+    /// Read the jobs and the relief, place the stock, cut every file into
+    /// it, compare with the relief, and write the cut, the report and the
+    /// deviation map (all or nothing).
     pub fn run(&self) -> Result<SimSummary> {
         let mut t = Timings::default();
         if let Some(k) = self
@@ -151,6 +175,102 @@ impl SimulateJob {
         if self.jobs.is_empty() {
             bail!("simulate: no job given");
         }
+        let mut jobs = self.read_jobs(&mut t)?;
+        let relief: Relief = t.time("load relief", || {
+            file::load(&self.relief, self.relief_width, self.relief_depth)
+        })?;
+        let tool = self
+            .tool
+            .as_deref()
+            .map(|s| machine.tool_for("--tool", s))
+            .transpose()?;
+        let mut tools = Vec::new();
+        for (what, prog, _) in &jobs.progs {
+            let runs =
+                sim::tool_runs(prog, tool).map_err(|e| crate::Error(format!("{what}: {e}")))?;
+            tools.extend(runs.iter().map(|r| r.2));
+        }
+        let stock = self.stock_for(&relief, jobs.frame, &tools)?;
+        let (w, h) = stock.cells();
+        let panel_at = jobs.frame.map_or((0.0, 0.0), |f| f.panel);
+        let mut cut = Grid::new(w, h, 0.0f32);
+        let surface = t.time("heightfield", || HeightField::of_relief(&relief));
+        let done = self.cut_all(
+            &mut jobs,
+            &stock,
+            &mut cut,
+            tool,
+            (&surface, panel_at),
+            &machine,
+            &mut t,
+        )?;
+        let tool = done.last_tool.expect("at least one job");
+        let (at_cells, residual, mean, dev) = t.time("compare", || {
+            sim::deviation(&stock, &cut, &relief, panel_at)
+        });
+        let by_moves = done.by_moves;
+        let gouge = at_cells.max(by_moves.mm);
+        let max_gouge_line = by_moves.line.filter(|_| by_moves.mm >= at_cells);
+        let max_gouge_at_mm = (at_cells > 0.0 && max_gouge_line.is_none())
+            .then(|| {
+                dev.data
+                    .iter()
+                    .position(|&d| !d.is_nan() && -(d as f64) >= at_cells)
+                    .map(|k| stock.centre(k % dev.w, k / dev.w))
+            })
+            .flatten();
+        let report = Report {
+            max_gouge_mm: gouge,
+            max_gouge_at_mm,
+            max_gouge_line,
+            gouge_exact_per_move: by_moves.every_tool,
+            max_residual_mm: residual,
+            mean_residual_mm: mean,
+            removed_mm3: sim::removed(&stock, &cut),
+            rapids_in_stock: done.rapids,
+            out_of_travel: done.out_of_travel,
+            time_s: done.time_s,
+            time_by_tool: done.time_by_tool,
+            lines: done.lines,
+            engagement: done.engagement,
+            frame: jobs.frame.map(|f| f.comment()),
+            cell_mm: stock.pitch,
+            between_cells_mm: between_cells(&tools, stock.pitch),
+        };
+        let what = jobs
+            .progs
+            .iter()
+            .map(|p| p.0.as_str())
+            .collect::<Vec<_>>()
+            .join(" + ");
+        let outputs = t.time("encode", || {
+            self.outputs(
+                &what,
+                tool,
+                (&relief, &stock, &cut),
+                &report,
+                &dev,
+                jobs.stepover,
+            )
+        });
+        t.time("write", || outputs.commit())?;
+        Ok(SimSummary {
+            report,
+            frame: jobs.frame,
+            tool,
+            cells: (w, h),
+            stock,
+            cut,
+            deviation: dev,
+            panel_at,
+            timings: t,
+        })
+    }
+
+    /// Each job file read and parsed; a file placed by its own frame (a
+    /// tile, say) moves into the first file's coordinates, and must share
+    /// its stock and panel.
+    fn read_jobs(&self, t: &mut Timings) -> Result<Jobs> {
         let mut progs = Vec::new();
         let mut frame = None;
         let mut stepover: Option<f64> = None;
@@ -163,8 +283,6 @@ impl SimulateJob {
             if let Some(s) = sim::map::finishing_stepover(&text) {
                 stepover = Some(stepover.map_or(s, |m: f64| m.max(s)));
             }
-            // a file placed by its own frame (a tile, say) moves into the
-            // first file's coordinates
             let mut offset = glam::DVec3::ZERO;
             match (frame, f) {
                 (None, f) => frame = f,
@@ -190,29 +308,25 @@ impl SimulateJob {
                 .map_err(|e| crate::Error(format!("{what}: {e}")))?;
             progs.push((what, prog, offset));
         }
-        let relief: Relief = t.time("load relief", || {
-            file::load(&self.relief, self.relief_width, self.relief_depth)
-        })?;
-        let tool = self
-            .tool
-            .as_deref()
-            .map(|s| machine.tool_for("--tool", s))
-            .transpose()?;
-        let mut tools = Vec::new();
-        for (what, prog, _) in &progs {
-            let runs =
-                sim::tool_runs(prog, tool).map_err(|e| crate::Error(format!("{what}: {e}")))?;
-            tools.extend(runs.iter().map(|r| r.2));
-        }
+        Ok(Jobs {
+            progs,
+            frame,
+            stepover,
+        })
+    }
+
+    /// The stock where the job's header puts it (else the relief's panel,
+    /// its depth plus 3 mm thick), its cells on the relief's samples, once
+    /// per relief pixel or oversampled for the job's tools.
+    fn stock_for(&self, relief: &Relief, frame: Option<Frame>, tools: &[Tool]) -> Result<Stock> {
         let cells_per_px = self.oversample.unwrap_or_else(|| {
             oversample_for(
-                &tools,
+                tools,
                 relief.pitch_mm(),
                 relief.heights.w * relief.heights.h,
             )
         });
         let pitch = relief.pitch_mm() / cells_per_px as f64;
-        // the stock and the relief where the job's header puts them
         let (x0, y0, fw, fh, ft) = frame.map_or(
             (
                 0.0,
@@ -229,8 +343,6 @@ impl SimulateJob {
             bail!("--stock {sw}x{sh}x{st}: sizes must be positive");
         }
         let panel_at = frame.map_or((0.0, 0.0), |f| f.panel);
-        // Z0 on the stock's bottom: the stock top is at Z = T
-        let z_shift = frame.filter(|f| f.z_bottom).map_or(0.0, |f| f.stock.4);
         let stock = Stock {
             x0,
             y0,
@@ -239,7 +351,6 @@ impl SimulateJob {
             thickness: st,
             pitch,
         }
-        // cells on the relief's samples, once per relief pixel or oversampled
         .aligned_to(panel_at.0, panel_at.1 + relief.height_mm);
         let (w, h) = stock.cells();
         if w.saturating_mul(h) > MAX_CELLS {
@@ -249,15 +360,38 @@ impl SimulateJob {
                 MAX_CELLS >> 20
             );
         }
-        let mut cut = Grid::new(w, h, 0.0f32);
-        let surface = t.time("heightfield", || HeightField::of_relief(&relief));
-        let mut by_moves = sim::MoveGouge::NONE;
-        let mut engagement = sim::Engagement::default();
-        let (mut rapids, mut out_of_travel, mut lines, mut time_s) = (vec![], vec![], 0, 0.0);
-        let mut time_by_tool: Vec<(String, f64)> = Vec::new();
-        let mut last_tool = None;
-        let travel_origin = self.travel_origin.unwrap_or((x0, y0));
-        for (what, prog, offset) in progs.iter_mut() {
+        Ok(stock)
+    }
+
+    /// Every file cut into the stock in turn: its travel judged, its cut,
+    /// its gouge along the moves, its engagement, its rapids in the stock
+    /// and its time by tool; lines numbered on from file to file.
+    #[allow(clippy::too_many_arguments)]
+    fn cut_all(
+        &self,
+        jobs: &mut Jobs,
+        stock: &Stock,
+        cut: &mut Grid<f32>,
+        tool: Option<Tool>,
+        (surface, panel_at): (&HeightField, (f64, f64)),
+        machine: &Machine,
+        t: &mut Timings,
+    ) -> Result<Cut> {
+        // Z0 on the stock's bottom: the stock top is at Z = T
+        let z_shift = jobs.frame.filter(|f| f.z_bottom).map_or(0.0, |f| f.stock.4);
+        let travel_origin = self.travel_origin.unwrap_or((stock.x0, stock.y0));
+        let mut c = Cut {
+            by_moves: sim::MoveGouge::NONE,
+            engagement: sim::Engagement::default(),
+            rapids: Vec::new(),
+            out_of_travel: Vec::new(),
+            lines: 0,
+            time_s: 0.0,
+            time_by_tool: Vec::new(),
+            last_tool: None,
+        };
+        for (what, prog, offset) in jobs.progs.iter_mut() {
+            let lines = c.lines;
             // the machine's travel is judged on the moves as written; a
             // file moved into the first one's frame (a tile) has the
             // machine's travel where its own moves begin
@@ -267,8 +401,8 @@ impl SimulateJob {
                 let (lo, _) = prog.bounds();
                 (lo.x, lo.y)
             };
-            out_of_travel.extend(
-                sim::out_of_travel(prog, &machine, origin)
+            c.out_of_travel.extend(
+                sim::out_of_travel(prog, machine, origin)
                     .iter()
                     .map(|n| n + lines),
             );
@@ -276,22 +410,20 @@ impl SimulateJob {
             prog.shift(*offset - glam::DVec3::new(0.0, 0.0, z_shift));
             let prog = &*prog;
             let (r, moves, runs) = t
-                .time("cut", || {
-                    sim::cut_program_measured(&stock, &mut cut, prog, tool)
-                })
+                .time("cut", || sim::cut_program_measured(stock, cut, prog, tool))
                 .map_err(|e| crate::Error(format!("{what}: {e}")))?;
-            last_tool = Some(runs[runs.len() - 1].2);
+            c.last_tool = Some(runs[runs.len() - 1].2);
             let g = t.time("gouge along moves", || {
-                sim::move_gouge(prog, &runs, &surface, panel_at, true)
+                sim::move_gouge(prog, &runs, surface, panel_at, true)
             });
             // lines are numbered per file; a second file's follow on
-            by_moves = by_moves.max(sim::MoveGouge {
+            c.by_moves = c.by_moves.max(sim::MoveGouge {
                 line: g.line.map(|n| n + lines),
                 ..g
             });
-            engagement.absorb(sim::Engagement::measure(prog, &moves, &runs, stock.pitch));
-            // lines are numbered per file; a second file's follow on
-            rapids.extend(r.iter().map(|n| n + lines));
+            c.engagement
+                .absorb(sim::Engagement::measure(prog, &moves, &runs, stock.pitch));
+            c.rapids.extend(r.iter().map(|n| n + lines));
             // the estimate by tool: each run from its (tool: ..) comment
             // (one run when --tool overrides them)
             let starts: Vec<usize> = if runs.len() == prog.tool_lines.len() {
@@ -300,97 +432,64 @@ impl SimulateJob {
                 vec![0]
             };
             let parts = t.time("time estimate", || {
-                sim::time_by_part(prog, &machine, &starts)
+                sim::time_by_part(prog, machine, &starts)
             });
             for (r, secs) in runs.iter().zip(parts) {
-                time_s += secs;
-                match time_by_tool.last_mut() {
+                c.time_s += secs;
+                match c.time_by_tool.last_mut() {
                     Some(last) if last.0 == r.2.spec() => last.1 += secs,
-                    _ => time_by_tool.push((r.2.spec(), secs)),
+                    _ => c.time_by_tool.push((r.2.spec(), secs)),
                 }
             }
-            lines += prog.lines;
+            c.lines += prog.lines;
         }
-        let tool = last_tool.expect("at least one job");
-        let (at_cells, residual, mean, dev) = t.time("compare", || {
-            sim::deviation(&stock, &cut, &relief, panel_at)
-        });
-        let gouge = at_cells.max(by_moves.mm);
-        let max_gouge_line = by_moves.line.filter(|_| by_moves.mm >= at_cells);
-        let max_gouge_at_mm = (at_cells > 0.0 && max_gouge_line.is_none())
-            .then(|| {
-                dev.data
-                    .iter()
-                    .position(|&d| !d.is_nan() && -(d as f64) >= at_cells)
-                    .map(|k| stock.centre(k % dev.w, k / dev.w))
-            })
-            .flatten();
-        let report = Report {
-            max_gouge_mm: gouge,
-            max_gouge_at_mm,
-            max_gouge_line,
-            gouge_exact_per_move: by_moves.every_tool,
-            max_residual_mm: residual,
-            mean_residual_mm: mean,
-            removed_mm3: sim::removed(&stock, &cut),
-            rapids_in_stock: rapids,
-            out_of_travel,
-            time_s,
-            time_by_tool,
-            lines,
-            engagement,
-            frame: frame.map(|f| f.comment()),
-            cell_mm: stock.pitch,
-            between_cells_mm: between_cells(&tools, stock.pitch),
-        };
-        let what = progs
-            .iter()
-            .map(|p| p.0.as_str())
-            .collect::<Vec<_>>()
-            .join(" + ");
+        Ok(c)
+    }
+
+    /// The cut as a relief file (same depth scale as the target, placed by
+    /// its lower-left corner in job coordinates), the report and the
+    /// deviation map, ready to write.
+    #[allow(clippy::too_many_arguments)]
+    fn outputs(
+        &self,
+        what: &str,
+        tool: Tool,
+        (relief, stock, cut): (&Relief, &Stock, &Grid<f32>),
+        report: &Report,
+        dev: &Grid<f32>,
+        stepover: Option<f64>,
+    ) -> Outputs<'_> {
         let mut out = Outputs::default();
-        t.time("encode", || {
-            // the cut as a relief file: same depth scale as the target
-            let d = relief.depth_mm;
-            let heights = cut.map(|z| (*z as f64 + d).clamp(0.0, d) as f32);
-            let as_relief = Relief {
-                heights,
-                width_mm: stock.width,
-                height_mm: stock.height,
-                depth_mm: d,
-            };
-            // where the cut lies in job coordinates: its lower-left corner
-            let (png, json) = file::encode_relief(
-                &as_relief,
-                serde_json::json!({
-                    "simulated": what,
-                    "tool": tool,
-                    "x0_mm": stock.x0,
-                    "y0_mm": stock.y0,
-                }),
+        let d = relief.depth_mm;
+        let heights = cut.map(|z| (*z as f64 + d).clamp(0.0, d) as f32);
+        let as_relief = Relief {
+            heights,
+            width_mm: stock.width,
+            height_mm: stock.height,
+            depth_mm: d,
+        };
+        let (png, json) = file::encode_relief(
+            &as_relief,
+            serde_json::json!({
+                "simulated": what,
+                "tool": tool,
+                "x0_mm": stock.x0,
+                "y0_mm": stock.y0,
+            }),
+        );
+        out.add(&self.output, png);
+        out.add(&file::sidecar_path(&self.output), json);
+        if let Some(p) = &self.report {
+            let mut j = serde_json::to_vec_pretty(report).expect("report serializes");
+            j.push(b'\n');
+            out.add(p, j);
+        }
+        if let Some(p) = &self.deviation {
+            out.add(
+                p,
+                deviation_png(dev, report.max_gouge_mm, stock.pitch, stepover),
             );
-            out.add(&self.output, png);
-            out.add(&file::sidecar_path(&self.output), json);
-            if let Some(p) = &self.report {
-                let mut j = serde_json::to_vec_pretty(&report).expect("report serializes");
-                j.push(b'\n');
-                out.add(p, j);
-            }
-            if let Some(p) = &self.deviation {
-                out.add(p, deviation_png(&dev, gouge, stock.pitch, stepover));
-            }
-        });
-        t.time("write", || out.commit())?;
-        Ok(SimSummary {
-            report,
-            frame,
-            tool,
-            cells: (w, h),
-            stock,
-            cut,
-            deviation: dev,
-            panel_at,
-            timings: t,
-        })
+        }
+        out
     }
 }
