@@ -7,11 +7,16 @@
 
 use super::state::State;
 use super::{JOG_CANCEL, SOFT_RESET, WELCOME};
-use crate::gcode::modal::{Modal, Probe, Step, PROBE_TOWARD};
+use crate::gcode::modal::{Modal, Step};
 use crate::gcode::parse::{parse_line, strip};
 use crate::machine::Machine;
 use glam::DVec3;
 use std::collections::VecDeque;
+
+mod probe;
+mod system;
+pub use probe::Plate;
+use probe::Probing;
 
 /// Planner blocks GRBL 1.1 holds on an Uno.
 pub const PLANNER_BLOCKS: usize = 15;
@@ -44,41 +49,6 @@ pub struct Faults {
     pub garble: f64,
 }
 
-/// A touch plate lying on the work: its top `thickness` over the stock
-/// top (machine Z 0 for a tool of length 0), a square of `size` centred
-/// at (x, y) machine coordinates. A probe touches it when the tool's tip
-/// reaches its top over it.
-#[derive(Clone, Copy, Debug)]
-pub struct Plate {
-    pub thickness: f64,
-    pub x: f64,
-    pub y: f64,
-    pub size: f64,
-}
-
-impl Plate {
-    /// `THICKNESS[@X,Y]` (mm; at 0,0 by default), 50 mm square.
-    pub fn parse(s: &str) -> Result<Plate, String> {
-        let bad = || format!("'{s}': expected THICKNESS[@X,Y] in mm");
-        let (t, at) = s.split_once('@').unwrap_or((s, "0,0"));
-        let (x, y) = at.split_once(',').ok_or_else(bad)?;
-        let num = |v: &str| v.trim().parse::<f64>().ok().filter(|v| v.is_finite());
-        match (num(t), num(x), num(y)) {
-            (Some(thickness), Some(x), Some(y)) if thickness >= 0.0 => Ok(Plate {
-                thickness,
-                x,
-                y,
-                size: 50.0,
-            }),
-            _ => Err(bad()),
-        }
-    }
-
-    fn under(&self, p: DVec3) -> bool {
-        (p.x - self.x).abs() <= self.size / 2.0 && (p.y - self.y).abs() <= self.size / 2.0
-    }
-}
-
 /// A completed move as the tool's tip went: machine coordinates less the
 /// length of the tool in the spindle (the `tool`-th, from 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -87,17 +57,6 @@ pub struct TipMove {
     pub to: DVec3,
     pub rapid: bool,
     pub tool: usize,
-}
-
-/// A probing move under way: when it ends, where the machine stops, the
-/// `[PRB:...]` report, and its line.
-#[derive(Clone, Debug)]
-struct Probing {
-    end: f64,
-    stop: DVec3,
-    touched: Option<DVec3>,
-    must_touch: bool,
-    line: String,
 }
 
 /// How a block moves: its length, its programmed and top speeds (mm/s),
@@ -548,95 +507,6 @@ impl SimGrbl {
         s
     }
 
-    /// Where the tip is below the spindle: the current tool's length.
-    fn tip(&self) -> DVec3 {
-        DVec3::new(
-            0.0,
-            0.0,
-            self.tool_lengths.get(self.tool).copied().unwrap_or(0.0),
-        )
-    }
-
-    /// A probing move from `from` toward `to` at the modal feed: where
-    /// the tip meets the plate's top (or, away, leaves it), and where the
-    /// machine stops, decelerating from the probe feed past the trigger.
-    fn start_probe(&mut self, from: DVec3, to: DVec3, probe: Probe, line: String) {
-        let tip = self.tip();
-        let top = self.plate.map(|p| p.thickness);
-        let contact = |q: DVec3| {
-            self.plate
-                .is_some_and(|p| p.under(q) && q.z - tip.z <= p.thickness + 1e-9)
-        };
-        if contact(from) != probe.away {
-            // already touching (or, away, not touching): GRBL refuses
-            self.raise(4);
-            return self.say("ok");
-        }
-        let d = to - from;
-        let len = d.length();
-        let u = d / len;
-        // the trigger: the tip crossing the plate's top over the plate
-        let touched = top.and_then(|t| {
-            let z0 = from.z - tip.z - t;
-            let z1 = to.z - tip.z - t;
-            if (z0 > 0.0) == (z1 > 0.0) || z0 == z1 {
-                return None;
-            }
-            let q = from + d * (z0 / (z0 - z1));
-            (contact(q) != probe.away || self.plate.is_some_and(|p| p.under(q))).then_some(q)
-        });
-        let feed = self.modal.feed.unwrap_or(1.0) / 60.0;
-        let a = (0..3)
-            .filter(|&k| u[k] != 0.0)
-            .map(|k| self.accel[k] / u[k].abs())
-            .fold(f64::INFINITY, f64::min);
-        let stop = match touched {
-            Some(q) => {
-                let run = (q - from).length();
-                let over = (feed * feed / (2.0 * a)).min(len - run);
-                from + u * (run + over)
-            }
-            None => to,
-        };
-        let dist = (stop - from).length();
-        let duration = dist / feed + feed / a;
-        self.probing = Some(Probing {
-            end: self.now + duration,
-            stop,
-            touched,
-            must_touch: probe.must_touch,
-            line,
-        });
-    }
-
-    /// The probing move has ended: report, or raise ALARM:5 when a G38.2
-    /// or G38.4 met nothing.
-    fn end_probe(&mut self) {
-        let Some(p) = self.probing.take() else { return };
-        let tip = self.tip();
-        self.tips.push(TipMove {
-            from: self.done - tip,
-            to: p.stop - tip,
-            rapid: false,
-            tool: self.tool,
-        });
-        self.done = p.stop;
-        self.modal.pos = p.stop;
-        self.probed = (p.touched.unwrap_or(p.stop), p.touched.is_some());
-        if p.touched.is_none() && p.must_touch {
-            self.raise(5);
-            return;
-        }
-        let r = format!(
-            "[PRB:{}:{}]",
-            triple(self.probed.0),
-            u8::from(self.probed.1)
-        );
-        self.say(&r);
-        self.log.push(p.line);
-        self.say("ok");
-    }
-
     fn say(&mut self, line: &str) {
         if self.disconnected {
             return; // the wire is gone
@@ -927,119 +797,6 @@ impl SimGrbl {
     /// refuses.
     fn interpret(&mut self, line: &str) -> Result<Step, u32> {
         self.modal.apply(&parse_line(line, 0)).map_err(|r| r.code)
-    }
-
-    fn system(&mut self, cmd: &str) {
-        if let Some(words) = cmd.strip_prefix("J=") {
-            return self.jog(words);
-        }
-        match cmd {
-            "C" => {
-                if self.check {
-                    self.say("[MSG:Disabled]");
-                    self.say("ok");
-                    self.reset();
-                } else {
-                    self.check = true;
-                    self.say("[MSG:Enabled]");
-                    self.say("ok");
-                }
-            }
-            "X" => {
-                if self.alarm.take().is_some() {
-                    self.say("[MSG:Caution: Unlocked]");
-                }
-                self.say("ok");
-            }
-            "H" => {
-                if !self.planner.is_empty() {
-                    return self.error(8);
-                }
-                self.alarm = None;
-                self.done = DVec3::ZERO;
-                self.modal.pos = DVec3::ZERO;
-                self.say("ok");
-            }
-            "$" => {
-                let t = self.travel;
-                let r = self.max_rate;
-                let s = self.steps;
-                let a = self.accel;
-                self.say(&format!("$11={:.3}", self.junction));
-                for (k, v) in [
-                    (100, s.x),
-                    (101, s.y),
-                    (102, s.z),
-                    (110, r.x),
-                    (111, r.y),
-                    (112, r.z),
-                    (120, a.x),
-                    (121, a.y),
-                    (122, a.z),
-                    (130, t.x),
-                    (131, t.y),
-                    (132, t.z),
-                ] {
-                    self.say(&format!("${k}={v:.3}"));
-                }
-                self.say("ok");
-            }
-            "#" => {
-                let m = &self.modal;
-                let mut lines: Vec<String> = (0..6)
-                    .map(|k| format!("[G{}:{}]", 54 + k, triple(m.stored.wcs[k])))
-                    .collect();
-                lines.push(format!("[G28:{}]", triple(m.stored.g28)));
-                lines.push(format!("[G30:{}]", triple(m.stored.g30)));
-                lines.push(format!("[G92:{}]", triple(m.g92)));
-                lines.push(format!("[TLO:{:.3}]", m.tlo));
-                lines.push(format!(
-                    "[PRB:{}:{}]",
-                    triple(self.probed.0),
-                    u8::from(self.probed.1)
-                ));
-                for l in lines {
-                    self.say(&l);
-                }
-                self.say("ok");
-            }
-            "G" => {
-                let m = &self.modal;
-                let motion = match m.motion {
-                    p if p >= PROBE_TOWARD => format!("38.{}", p - PROBE_TOWARD + 2),
-                    p => p.to_string(),
-                };
-                let coolant = match m.coolant {
-                    (false, false) => "M9".to_string(),
-                    (mist, flood) => [(mist, "M7"), (flood, "M8")]
-                        .iter()
-                        .filter(|c| c.0)
-                        .map(|c| c.1)
-                        .collect::<Vec<_>>()
-                        .join(" "),
-                };
-                let s = format!(
-                    "[GC:G{motion} G{} G{} {} {} {} M{} {coolant} T{} F{} S{}]",
-                    54 + m.coord,
-                    m.plane.code(),
-                    if m.inches { "G20" } else { "G21" },
-                    if m.absolute { "G90" } else { "G91" },
-                    if m.inverse_time { "G93" } else { "G94" },
-                    m.spindle.unwrap_or(5),
-                    m.tool,
-                    m.feed.unwrap_or(0.0),
-                    m.speed
-                );
-                self.say(&s);
-                self.say("ok");
-            }
-            "I" => {
-                self.say("[VER:1.1h.20190830:relievo simulated machine]");
-                self.say(&format!("[OPT:V,{PLANNER_BLOCKS},{}]", self.rx_size));
-                self.say("ok");
-            }
-            _ => self.error(3),
-        }
     }
 }
 
