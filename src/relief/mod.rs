@@ -428,27 +428,7 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
             to_mm(&field.depth.map(|v| *v as f64), subject)
         }),
         Method::Gradient => {
-            let (mut gx, mut gy) = (field.gx.clone(), field.gy.clone());
-            if !p.bands.is_empty() {
-                (gx, gy) = t.time("feature bands", || {
-                    rayon::join(
-                        || bands::feature_scale(&gx, &field.barrier, &p.bands),
-                        || bands::feature_scale(&gy, &field.barrier, &p.bands),
-                    )
-                });
-            }
-            for s in stencils {
-                t.time("selective scale", || {
-                    for g in [&mut gx, &mut gy] {
-                        g.data
-                            .par_iter_mut()
-                            .zip(s.weight.data.par_iter())
-                            .for_each(|(v, wt)| {
-                                *v *= 1.0 + (s.gain as f32 - 1.0) * wt;
-                            });
-                    }
-                });
-            }
+            let (mut gx, mut gy) = scaled_gradients(field, p, stencils, t);
             // with a flat background (where there is any), no part of the
             // subject below it
             if p.background == Background::Flat && field.mask.data.iter().all(|&m| m) {
@@ -527,4 +507,36 @@ pub fn build(field: &Field, p: &Params, stencils: &[Stencil], t: &mut Timings) -
         height_mm,
         depth_mm: p.depth_mm,
     })
+}
+
+/// The field's gradients with the feature bands' and the stencils' gains
+/// applied.
+fn scaled_gradients(
+    field: &Field,
+    p: &Params,
+    stencils: &[Stencil],
+    t: &mut Timings,
+) -> (Grid<f32>, Grid<f32>) {
+    let (mut gx, mut gy) = (field.gx.clone(), field.gy.clone());
+    if !p.bands.is_empty() {
+        (gx, gy) = t.time("feature bands", || {
+            rayon::join(
+                || bands::feature_scale(&gx, &field.barrier, &p.bands),
+                || bands::feature_scale(&gy, &field.barrier, &p.bands),
+            )
+        });
+    }
+    for s in stencils {
+        t.time("selective scale", || {
+            for g in [&mut gx, &mut gy] {
+                g.data
+                    .par_iter_mut()
+                    .zip(s.weight.data.par_iter())
+                    .for_each(|(v, wt)| {
+                        *v *= 1.0 + (s.gain as f32 - 1.0) * wt;
+                    });
+            }
+        });
+    }
+    (gx, gy)
 }

@@ -487,40 +487,15 @@ fn cut_impl<const STATS: bool>(
                 if *band_top < low {
                     continue;
                 }
-                let (nx, ny) = engage::across(&sw);
-                let mut hit = false;
-                for j in ja..jb {
-                    let (_, y) = stock.centre(0, j);
-                    let Some(reach) = tool.reach(row_top[j - ja] - low) else {
-                        continue;
-                    };
-                    let Some((i0, i1)) = cells_in(stock, w, sw.row_span(y, reach)) else {
-                        continue;
-                    };
-                    let row = &mut rows[(j - ja) * w..(j - ja + 1) * w];
-                    let wy = y - sw.a.y;
-                    for (i, cell) in row.iter_mut().enumerate().take(i1 + 1).skip(i0) {
-                        let x = stock.x0 + (i as f64 + 0.5) * p;
-                        let z = sw.lowest(x - sw.a.x, wy);
-                        if z < *cell as f64 {
-                            if rapid && z < *cell as f64 - TOUCH && *cell > floor {
-                                hit = true;
-                            }
-                            let new = (z as f32).max(floor);
-                            if STATS {
-                                let (ex, ey) = (x - seg.b.x, y - seg.b.y);
-                                let wx = x - sw.a.x;
-                                mc.add(
-                                    *cell - new,
-                                    (wx * nx + wy * ny) as f32,
-                                    ex * ex + ey * ey <= core2,
-                                    engage::shaved(sw.axis_distance(wx, wy) as f32, r as f32),
-                                );
-                            }
-                            *cell = new;
-                        }
-                    }
-                }
+                let hit = sweep_rows::<STATS>(
+                    stock,
+                    (rows, ja, jb, w),
+                    (row_top, low),
+                    (seg, &sw, tool),
+                    floor,
+                    core2,
+                    &mut mc,
+                );
                 if hit {
                     hits.push(seg.line);
                 }
@@ -546,6 +521,60 @@ fn cut_impl<const STATS: bool>(
     touched.sort_unstable();
     touched.dedup();
     (touched, moves)
+}
+
+/// One move (not a ball's cut, which `ball_rows` takes) swept over a band's
+/// rows `ja..jb`: each cell lowered to the tool's lowest point over it,
+/// where the row's highest cell (`row_top`) stands above the move's lowest
+/// point (`low`). True when a rapid went through material.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn sweep_rows<const STATS: bool>(
+    stock: &Stock,
+    (rows, ja, jb, w): (&mut [f32], usize, usize, usize),
+    (row_top, low): (&[f64], f64),
+    (seg, sw, tool): (&Segment, &Sweep, Tool),
+    floor: f32,
+    core2: f64,
+    mc: &mut MoveCut,
+) -> bool {
+    let (p, r) = (stock.pitch, tool.radius());
+    let rapid = seg.kind == Kind::Rapid;
+    let (nx, ny) = engage::across(sw);
+    let mut hit = false;
+    for j in ja..jb {
+        let (_, y) = stock.centre(0, j);
+        let Some(reach) = tool.reach(row_top[j - ja] - low) else {
+            continue;
+        };
+        let Some((i0, i1)) = cells_in(stock, w, sw.row_span(y, reach)) else {
+            continue;
+        };
+        let row = &mut rows[(j - ja) * w..(j - ja + 1) * w];
+        let wy = y - sw.a.y;
+        for (i, cell) in row.iter_mut().enumerate().take(i1 + 1).skip(i0) {
+            let x = stock.x0 + (i as f64 + 0.5) * p;
+            let z = sw.lowest(x - sw.a.x, wy);
+            if z < *cell as f64 {
+                if rapid && z < *cell as f64 - TOUCH && *cell > floor {
+                    hit = true;
+                }
+                let new = (z as f32).max(floor);
+                if STATS {
+                    let (ex, ey) = (x - seg.b.x, y - seg.b.y);
+                    let wx = x - sw.a.x;
+                    mc.add(
+                        *cell - new,
+                        (wx * nx + wy * ny) as f32,
+                        ex * ex + ey * ey <= core2,
+                        engage::shaved(sw.axis_distance(wx, wy) as f32, r as f32),
+                    );
+                }
+                *cell = new;
+            }
+        }
+    }
+    hit
 }
 
 /// Lines whose moves leave the machine's travel, with the travel box's

@@ -241,73 +241,9 @@ pub fn every_nth(slope: f64) -> Option<i64> {
 /// exact CL surface within LEVEL_TOL below the level.
 pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
     let (w, h) = (g.z.w, g.z.h);
-    let above = |i: usize, j: usize| g.at(i, j) >= level;
-    // segments from a crossing edge to the next, cell by cell: walking a
-    // cell's edges counter-clockwise, a segment runs from an edge that goes
-    // above -> below to one that goes below -> above, which keeps the
-    // material on its left
     let cells: Vec<Vec<(Edge, Edge)>> = (0..h - 1)
         .into_par_iter()
-        .map(|j| {
-            let mut segs = Vec::new();
-            // rows wholly below or above the level hold no contour
-            let (lo, hi) = (
-                g.row_range[j].0.min(g.row_range[j + 1].0),
-                g.row_range[j].1.max(g.row_range[j + 1].1),
-            );
-            if level > hi || level <= lo {
-                return segs;
-            }
-            for i in 0..w - 1 {
-                let c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
-                let up = c.map(|(a, b)| above(a, b));
-                if up.iter().all(|&u| u) || up.iter().all(|&u| !u) {
-                    continue;
-                }
-                let edges = [
-                    Edge {
-                        i,
-                        j,
-                        vertical: false,
-                    },
-                    Edge {
-                        i: i + 1,
-                        j,
-                        vertical: true,
-                    },
-                    Edge {
-                        i,
-                        j: j + 1,
-                        vertical: false,
-                    },
-                    Edge {
-                        i,
-                        j,
-                        vertical: true,
-                    },
-                ];
-                // crossing edges in counter-clockwise order, true = down
-                let cross: Vec<(Edge, bool)> = (0..4)
-                    .filter(|&k| up[k] != up[(k + 1) % 4])
-                    .map(|k| (edges[k], up[k]))
-                    .collect();
-                let centre_up = c.iter().map(|&(a, b)| g.at(a, b)).sum::<f64>() / 4.0 >= level;
-                let n = cross.len();
-                for k in 0..n {
-                    if !cross[k].1 {
-                        continue;
-                    }
-                    // saddle: the above corners join through an above centre
-                    let to = if n == 2 || centre_up {
-                        (k + 1) % n
-                    } else {
-                        (k + n - 1) % n
-                    };
-                    segs.push((cross[k].0, cross[to].0));
-                }
-            }
-            segs
-        })
+        .map(|j| row_segments(g, level, j))
         .collect();
     // every crossing edge and the one its segment leads to, in scan order
     // (row, column, horizontal first), found again by binary search
@@ -321,26 +257,7 @@ pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
     // each crossing on the exact CL surface, low side
     let points: Vec<(DVec3, f64, Crossing)> = next
         .par_iter()
-        .map(|&(e, _)| {
-            let ((ai, aj), (bi, bj)) = e.nodes();
-            let (pa, pb) = (g.pos(ai, aj), g.pos(bi, bj));
-            let (lo, hi) = if above(ai, aj) { (pb, pa) } else { (pa, pb) };
-            let slope = g.slope(ai, aj).max(g.slope(bi, bj));
-            // where the grid's straight line between the nodes crosses
-            let (zl, zh) = if above(ai, aj) {
-                (g.at(bi, bj), g.at(ai, aj))
-            } else {
-                (g.at(ai, aj), g.at(bi, bj))
-            };
-            let guess = ((level - zl) / (zh - zl)).clamp(0.0, 1.0);
-            let at = DVec3::new(
-                lo.0 + (hi.0 - lo.0) * guess,
-                lo.1 + (hi.1 - lo.1) * guess,
-                level,
-            );
-            let z = (zl, zh);
-            (at, slope, Crossing { lo, hi, z })
-        })
+        .map(|&(e, _)| grid_crossing(g, level, e))
         .collect();
     let mut seen = vec![false; next.len()];
     let mut out = Vec::new();
@@ -374,6 +291,98 @@ pub fn contours(g: &ClGrid, level: f64) -> Vec<Contour> {
         });
     }
     out
+}
+
+/// Row `j`'s contour segments at `level`, from a crossing edge to the next,
+/// cell by cell: walking a cell's edges counter-clockwise, a segment runs
+/// from an edge that goes above -> below to one that goes below -> above,
+/// which keeps the material on its left.
+fn row_segments(g: &ClGrid, level: f64, j: usize) -> Vec<(Edge, Edge)> {
+    let w = g.z.w;
+    let above = |i: usize, j: usize| g.at(i, j) >= level;
+    let mut segs = Vec::new();
+    // rows wholly below or above the level hold no contour
+    let (lo, hi) = (
+        g.row_range[j].0.min(g.row_range[j + 1].0),
+        g.row_range[j].1.max(g.row_range[j + 1].1),
+    );
+    if level > hi || level <= lo {
+        return segs;
+    }
+    for i in 0..w - 1 {
+        let c = [(i, j), (i + 1, j), (i + 1, j + 1), (i, j + 1)];
+        let up = c.map(|(a, b)| above(a, b));
+        if up.iter().all(|&u| u) || up.iter().all(|&u| !u) {
+            continue;
+        }
+        let edges = [
+            Edge {
+                i,
+                j,
+                vertical: false,
+            },
+            Edge {
+                i: i + 1,
+                j,
+                vertical: true,
+            },
+            Edge {
+                i,
+                j: j + 1,
+                vertical: false,
+            },
+            Edge {
+                i,
+                j,
+                vertical: true,
+            },
+        ];
+        // crossing edges in counter-clockwise order, true = down
+        let cross: Vec<(Edge, bool)> = (0..4)
+            .filter(|&k| up[k] != up[(k + 1) % 4])
+            .map(|k| (edges[k], up[k]))
+            .collect();
+        let centre_up = c.iter().map(|&(a, b)| g.at(a, b)).sum::<f64>() / 4.0 >= level;
+        let n = cross.len();
+        for k in 0..n {
+            if !cross[k].1 {
+                continue;
+            }
+            // saddle: the above corners join through an above centre
+            let to = if n == 2 || centre_up {
+                (k + 1) % n
+            } else {
+                (k + n - 1) % n
+            };
+            segs.push((cross[k].0, cross[to].0));
+        }
+    }
+    segs
+}
+
+/// Where the level crosses edge `e`: on the grid's straight line between
+/// its nodes (to be placed on the exact CL surface later), the steeper
+/// node's slope, and the crossing's low and high sides.
+fn grid_crossing(g: &ClGrid, level: f64, e: Edge) -> (DVec3, f64, Crossing) {
+    let above = |i: usize, j: usize| g.at(i, j) >= level;
+    let ((ai, aj), (bi, bj)) = e.nodes();
+    let (pa, pb) = (g.pos(ai, aj), g.pos(bi, bj));
+    let (lo, hi) = if above(ai, aj) { (pb, pa) } else { (pa, pb) };
+    let slope = g.slope(ai, aj).max(g.slope(bi, bj));
+    // where the grid's straight line between the nodes crosses
+    let (zl, zh) = if above(ai, aj) {
+        (g.at(bi, bj), g.at(ai, aj))
+    } else {
+        (g.at(ai, aj), g.at(bi, bj))
+    };
+    let guess = ((level - zl) / (zh - zl)).clamp(0.0, 1.0);
+    let at = DVec3::new(
+        lo.0 + (hi.0 - lo.0) * guess,
+        lo.1 + (hi.1 - lo.1) * guess,
+        level,
+    );
+    let z = (zl, zh);
+    (at, slope, Crossing { lo, hi, z })
 }
 
 /// The contour with every pending point found on the exact CL surface
