@@ -3,9 +3,9 @@
 //! `cargo bench --bench dropcutter` (the bunny from fixtures/).
 
 use rayon::prelude::*;
+use relievo::cutter::dropcutter::HeightField;
 use relievo::job::ReliefJob;
 use relievo::tool::Tool;
-use relievo::toolpath::dropcutter::HeightField;
 use std::time::Instant;
 
 fn main() {

@@ -3,8 +3,9 @@
 //! Prints the rows' merged moves and `fewest::bound`'s count.
 //!
 //! `cargo run --release --example cl_rows -- RELIEF.png OUT.txt [TOOL] [STEPOVER_MM]`
+use relievo::cutter::dropcutter::HeightField;
 use relievo::error::Context;
-use relievo::toolpath::{dropcutter::HeightField, fewest, merge::merge, raster};
+use relievo::toolpath::{fewest, merge::merge, raster};
 use std::io::{BufWriter, Write};
 
 fn main() -> relievo::Result<()> {

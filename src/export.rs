@@ -12,7 +12,7 @@ use stl_io::{Normal, Triangle, Vertex};
 /// samples joined by two triangles per cell and carried flat to the
 /// panel's edges.
 pub fn solid(r: &Relief, base_mm: f64) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let l = crate::surface::Lattice::of(r);
+    let l = crate::cutter::surface::Lattice::of(r);
     let (w, h) = (l.w + 2, l.h + 2);
     let bottom = (-r.depth_mm - base_mm) as f32;
     let xy = |i: usize, j: usize| [l.vx(i) as f32, l.vy(j) as f32];

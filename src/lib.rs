@@ -3,6 +3,8 @@
 //! scene -> relief -> (toolpath -> gcode -> sim / grbl).
 
 pub mod cam;
+pub mod cutter;
+pub mod dialect;
 pub mod error;
 pub mod export;
 pub mod grid;
@@ -25,8 +27,7 @@ pub mod machine;
 pub mod sim;
 pub mod simulate;
 pub mod studio;
-pub mod surface;
-pub mod sweep;
+
 #[cfg(test)]
 mod testing;
 pub mod tool;

@@ -3,16 +3,17 @@
 
 use crate::bail;
 use crate::cam::layout::Frame;
+use crate::cutter::dropcutter::HeightField;
 use crate::error::Result;
 use crate::gcode;
 use crate::grid::Grid;
 use crate::machine::Machine;
 use crate::output::{check_writable, Outputs};
 use crate::relief::{file, Relief};
+use crate::sim::cells::{between_cells, oversample_for, MAX_CELLS, MAX_OVERSAMPLE};
 use crate::sim::{self, Report, Stock};
 use crate::timing::Timings;
 use crate::tool::Tool;
-use crate::toolpath::dropcutter::HeightField;
 use std::path::PathBuf;
 
 #[derive(Clone, Debug)]
@@ -91,41 +92,6 @@ fn deviation_png(dev: &Grid<f32>, gouge: f64, cell: f64, stepover: Option<f64>) 
         .fold(0.0f64, |m, d| m.max(*d as f64));
     let (w, h, rgb) = sim::map::picture(&shown, sim::map::nice_scale(gouge.max(most)));
     file::png_rgb(w, h, &rgb)
-}
-
-/// What a cut's bottom may hide between stock cells by default (mm).
-pub const BETWEEN_CELLS: f64 = 1e-3;
-/// Most stock cells per relief pixel along each axis.
-pub const MAX_OVERSAMPLE: usize = 15;
-/// Most stock cells taken (two grids of f32 besides the job: 1 GiB).
-pub const MAX_CELLS: usize = 1 << 27;
-/// Most stock cells an automatic choice makes.
-const AUTO_CELLS: usize = 1 << 25;
-
-/// How far below the cell centres a tool's cut can reach between them:
-/// its profile half a cell diagonal from the tip (where a ball's groove
-/// bottom may run between rows of centres). A V-bit's point is sharp, so
-/// its bound is linear in the cell size.
-pub fn between_cells(tools: &[Tool], cell: f64) -> f64 {
-    let half_diagonal = cell / std::f64::consts::SQRT_2;
-    tools
-        .iter()
-        .map(|t| t.profile(half_diagonal.min(t.radius())))
-        .fold(0.0, f64::max)
-}
-
-/// The smallest odd number of stock cells per relief pixel (odd, so that
-/// cells stay centred on the samples) that keeps `between_cells` within
-/// BETWEEN_CELLS, as far as MAX_OVERSAMPLE and AUTO_CELLS allow.
-pub fn oversample_for(tools: &[Tool], pitch: f64, samples: usize) -> usize {
-    let mut k = 1;
-    while between_cells(tools, pitch / k as f64) > BETWEEN_CELLS
-        && k + 2 <= MAX_OVERSAMPLE
-        && samples * (k + 2) * (k + 2) <= AUTO_CELLS
-    {
-        k += 2;
-    }
-    k
 }
 
 /// The job's files read: each with its name, program and the offset that

@@ -3,8 +3,8 @@
 
 mod common;
 use common::*;
+use relievo::cutter::dropcutter::HeightField;
 use relievo::tool::Tool;
-use relievo::toolpath::dropcutter::HeightField;
 
 /// What an ideal raster (exact ball positions every half sample along rows
 /// y = 0, s, 2s, ..., h) leaves at each sample: the scallop of the

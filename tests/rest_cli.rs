@@ -3,8 +3,8 @@
 
 mod common;
 use common::*;
+use relievo::cutter::dropcutter::HeightField;
 use relievo::tool::Tool;
-use relievo::toolpath::dropcutter::HeightField;
 
 /// The simulated cut of a carve (`extra` flags added) at the relief's
 /// samples, mm from the stock top; with the relief's heights and depth.
@@ -51,7 +51,7 @@ fn cut(d: &std::path::Path, name: &str, model: Option<&str>, extra: &[&str]) -> 
         .collect();
     // the most each sample's cells stand above the continuous relief
     let r = relievo::relief::file::load(&relief, None, None).unwrap();
-    let surface = relievo::surface::Lattice::of(&r);
+    let surface = relievo::cutter::surface::Lattice::of(&r);
     let (cell, height) = (r.width_mm / cw as f64, r.height_mm);
     let mut over = vec![f64::MIN; w * h];
     for cj in 0..ch {

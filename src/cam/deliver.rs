@@ -88,7 +88,7 @@ impl ToolpathJob {
                 .flat_map(|f| f.1.iter().map(|o| o.tool))
                 .collect();
             let samples = relief.heights.w * relief.heights.h;
-            let k = crate::simulate::oversample_for(&tools, pitch, samples);
+            let k = crate::sim::cells::oversample_for(&tools, pitch, samples);
             cell.min(pitch / k as f64)
         };
         let mut judged = t.time("judge", || {

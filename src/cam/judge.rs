@@ -3,13 +3,13 @@
 //! the result compared with the relief.
 
 use super::layout::Plan;
+use crate::cutter::dropcutter::HeightField;
 use crate::error::Result;
 use crate::gcode::{Kind, Program};
 use crate::grid::Grid;
 use crate::relief::Relief;
 use crate::sim::{self, Engagement, MoveCut, Over, Stock};
 use crate::tool::Tool;
-use crate::toolpath::dropcutter::HeightField;
 
 pub struct Judged {
     pub stock: Stock,

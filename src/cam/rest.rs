@@ -4,12 +4,12 @@
 //! from the geometry.
 
 use super::stock::Planned;
+use crate::cutter::dropcutter::HeightField;
 use crate::error::Result;
 use crate::grid::Grid;
 use crate::relief::Relief;
 use crate::sim::Stock;
 use crate::tool::Tool;
-use crate::toolpath::dropcutter::HeightField;
 use crate::toolpath::path;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -44,7 +44,7 @@ impl Unfinished {
     /// relief's continuous surface (panel coordinates), grown by `grow` mm.
     pub fn find(planned: &Planned, relief: &Relief, threshold: f64, grow: f64) -> Unfinished {
         let stock = planned.stock;
-        let lattice = crate::surface::Lattice::of(relief);
+        let lattice = crate::cutter::surface::Lattice::of(relief);
         let (w, h) = (planned.top.w, planned.top.h);
         let mut left = Grid::new(w, h, false);
         left.data

@@ -4,6 +4,7 @@
 
 use super::{boundary, layout, stock, Boundary, Finish, Roughing, Stepover, ToolpathJob, ZZero};
 use crate::bail;
+use crate::cutter::dropcutter::HeightField;
 use crate::error::Result;
 use crate::gcode::emit::Settings;
 use crate::machine::Machine;
@@ -13,7 +14,6 @@ use crate::relief::Relief;
 use crate::sim;
 use crate::timing::Timings;
 use crate::tool::Tool;
-use crate::toolpath::dropcutter::HeightField;
 use std::path::PathBuf;
 
 /// The finest stepover taken, mm.

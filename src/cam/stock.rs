@@ -3,11 +3,11 @@
 //! later operations know where material is left: where to step down, and
 //! from how high each pass must ramp in instead of plunging.
 
+use crate::cutter::dropcutter::HeightField;
 use crate::gcode::{Kind, Segment};
 use crate::grid::Grid;
 use crate::sim::{self, Stock};
 use crate::tool::Tool;
-use crate::toolpath::dropcutter::HeightField;
 use crate::toolpath::{path, Pass};
 use glam::DVec3;
 
@@ -41,8 +41,8 @@ impl Planned {
         let (w, h) = (self.top.w, self.top.h);
         let top = s.y0 + s.height;
         let (Some((i0, i1)), Some((j0, j1))) = (
-            crate::sweep::cells_between(x - r - s.x0, x + r - s.x0, s.pitch, w),
-            crate::sweep::cells_between(top - y - r, top - y + r, s.pitch, h),
+            crate::cutter::sweep::cells_between(x - r - s.x0, x + r - s.x0, s.pitch, w),
+            crate::cutter::sweep::cells_between(top - y - r, top - y + r, s.pitch, h),
         ) else {
             return init;
         };

@@ -3,10 +3,10 @@
 //! may cut at once, each merged and checked against the exact tool.
 
 use super::{order, stock, tile, Direction, Finish, ToolpathJob};
+use crate::cutter::dropcutter::HeightField;
 use crate::gcode::emit::Settings;
 use crate::relief::Relief;
 use crate::tool::Tool;
-use crate::toolpath::dropcutter::HeightField;
 use crate::toolpath::{contour_arcs, merge, path, pencil, raster, rough, waterline, Pass};
 use glam::DVec3;
 use rayon::prelude::*;

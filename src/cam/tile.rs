@@ -49,7 +49,8 @@ pub fn clip(pts: &[DVec3], rect: [f64; 4]) -> Vec<Vec<DVec3>> {
     for w in pts.windows(2) {
         let (a, b) = (w[0], w[1]);
         let d = b - a;
-        let Some((t0, t1)) = crate::sweep::clip_to_rect((a.x, a.y), (d.x, d.y), rect) else {
+        let Some((t0, t1)) = crate::cutter::sweep::clip_to_rect((a.x, a.y), (d.x, d.y), rect)
+        else {
             if cur.len() > 1 {
                 out.push(std::mem::take(&mut cur));
             }

@@ -3,7 +3,8 @@
 //! decimals (5 in inches: a 0.25 um grid), every line at most 79
 //! characters. Heights are rounded up, never into the material.
 
-use super::arc::{self, Arc, Plane};
+use crate::dialect::arc::{self, Arc, Plane};
+use crate::dialect::chords::arc_run;
 use glam::DVec3;
 use std::fmt::Write;
 
@@ -213,7 +214,7 @@ impl Emitter {
     /// The points go on the G-code grid (XY rounded, Z rounded up); runs
     /// of exact GRBL arc chords among them become G2/G3 when `arcs`.
     pub fn pass(&mut self, pts: &[DVec3], s: &Settings, clear_z: f64) {
-        use crate::toolpath::path::{snap, snap_up};
+        use crate::dialect::{snap, snap_up};
         let grid = |p: DVec3| DVec3::new(snap(p.x), snap(p.y), snap_up(p.z));
         let Some(&first) = pts.first() else { return };
         let first = grid(first);
@@ -386,93 +387,6 @@ impl Emitter {
     }
 }
 
-/// The longest run of `pts` from `i` that is exactly the chords GRBL cuts
-/// one arc into (at least two chords, in one plane, equal angles, ends on
-/// the circle, the linear axis in equal steps: a helix where they are not
-/// nought, as a ramp along a waterline's arc): its last index and the arc.
-pub fn arc_run(pts: &[DVec3], i: usize, tol: f64) -> Option<(usize, Arc)> {
-    const EPS: f64 = 1e-9;
-    if i + 2 >= pts.len() {
-        return None;
-    }
-    let (p0, p1, p2) = (pts[i], pts[i + 1], pts[i + 2]);
-    let plane = if p0.y == p1.y && p1.y == p2.y {
-        Plane::Zx
-    } else if p0.x == p1.x && p1.x == p2.x {
-        Plane::Yz
-    } else if ((p2.z - p1.z) - (p1.z - p0.z)).abs() < EPS {
-        Plane::Xy
-    } else {
-        return None;
-    };
-    let (a0, a1, lin) = plane.axes();
-    let q = |p: DVec3| (p[a0], p[a1]);
-    let ((x0, y0), (x1, y1), (x2, y2)) = (q(p0), q(p1), q(p2));
-    // circumcentre of the first three
-    let d = 2.0 * (x0 * (y1 - y2) + x1 * (y2 - y0) + x2 * (y0 - y1));
-    if d.abs() < 1e-12 {
-        return None;
-    }
-    let s0 = x0 * x0 + y0 * y0;
-    let s1 = x1 * x1 + y1 * y1;
-    let s2 = x2 * x2 + y2 * y2;
-    let cx = (s0 * (y1 - y2) + s1 * (y2 - y0) + s2 * (y0 - y1)) / d;
-    let cy = (s0 * (x2 - x1) + s1 * (x0 - x2) + s2 * (x1 - x0)) / d;
-    let r = (x0 - cx).hypot(y0 - cy);
-    if r > crate::toolpath::arcs::MAX_RADIUS {
-        return None;
-    }
-    let chord = (x1 - x0).hypot(y1 - y0);
-    let turn = |a: (f64, f64), b: (f64, f64)| (a.0 - cx) * (b.1 - cy) - (a.1 - cy) * (b.0 - cx);
-    let cw = turn((x0, y0), (x1, y1)) < 0.0;
-    let step = p1[lin] - p0[lin];
-    let mut j = i + 1;
-    while j + 1 < pts.len() {
-        let (a, b) = (pts[j], pts[j + 1]);
-        let (pa, pb) = (q(a), q(b));
-        let same = ((b[lin] - a[lin]) - step).abs() < EPS
-            && ((pb.0 - cx).hypot(pb.1 - cy) - r).abs() < EPS
-            && ((pb.0 - pa.0).hypot(pb.1 - pa.1) - chord).abs() < EPS
-            && (turn(pa, pb) < 0.0) == cw;
-        if !same {
-            break;
-        }
-        j += 1;
-    }
-    let arc = Arc {
-        plane,
-        clockwise: cw,
-        centre: (cx, cy),
-        radius: r,
-    };
-    // GRBL's count for the arc to j; a run of two arcs on one circle
-    // is cut at the first's end
-    while j >= i + 2 {
-        if arc.chords(arc.travel(p0, pts[j]), tol) == j - i {
-            return Some((j, arc));
-        }
-        j -= 1;
-    }
-    None
-}
-
-/// Every maximal run of GRBL arc chords in `pts` (`arc_run`), as the
-/// indices (i, j) of its first and last point.
-pub fn arc_runs(pts: &[DVec3]) -> Vec<(usize, usize)> {
-    let mut runs = Vec::new();
-    let mut i = 0;
-    while i + 1 < pts.len() {
-        match arc_run(pts, i, arc::GRBL_ARC_TOLERANCE) {
-            Some((j, _)) => {
-                runs.push((i, j));
-                i = j;
-            }
-            None => i += 1,
-        }
-    }
-    runs
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -598,35 +512,6 @@ mod arc_tests {
             .filter(|s| s.kind == crate::gcode::Kind::Feed)
             .map(|s| s.b)
             .collect()
-    }
-
-    /// A fitted row written with arcs reads back as the very chords the
-    /// fit checked.
-    #[test]
-    fn arcs_read_back_as_the_checked_chords() {
-        let s = no_dwell();
-        for (y, rev) in [(3.0, false), (3.3, true)] {
-            let mut pts: Vec<DVec3> = (0..=400)
-                .map(|i| {
-                    let x = i as f64 * 0.05;
-                    DVec3::new(x, y, -2.0 + 0.8 * (x * 0.4).sin() + 0.3 * (x * 0.9).cos())
-                })
-                .collect();
-            if rev {
-                pts.reverse();
-            }
-            let fitted = crate::toolpath::arcs::fit(&pts, 0.01);
-            let mut e = Emitter::new(&[], &s, false, 0.0);
-            e.arcs = true;
-            e.pass(&fitted, &s, 5.0);
-            let g = e.finish(&s);
-            assert!(g.contains("G18"), "{g}");
-            let cut = feeds(&g);
-            assert_eq!(cut.len(), fitted.len(), "one chord per fitted point");
-            for (a, b) in cut.iter().zip(&fitted) {
-                assert!((*a - *b).length() < 3e-4, "{a} vs {b}");
-            }
-        }
     }
 
     /// GRBL's chords of an XY arc, level and descending (a ramp along a

@@ -2,12 +2,12 @@
 //! the sender, and the modal interpreter that turns a program into straight
 //! tool moves (arcs become the chords GRBL cuts them into, `arc`).
 
-pub mod arc;
 pub mod emit;
 pub mod modal;
 pub mod parse;
 
 use crate::bail;
+use crate::dialect::arc;
 use crate::error::Result;
 use glam::DVec3;
 

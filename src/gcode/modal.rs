@@ -5,8 +5,8 @@
 //! follows GRBL 1.1h's gc_execute_line (default build) check for check and
 //! in its order, so that a line it refuses gets GRBL's own error code.
 
-use super::arc::{self, Arc, Plane};
 use super::parse::Line;
+use crate::dialect::arc::{self, Arc, Plane};
 use glam::DVec3;
 
 /// What GRBL keeps in its EEPROM and so across resets: the six work

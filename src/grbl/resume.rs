@@ -256,7 +256,7 @@ pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
     if m.inches {
         out.push("G20".into());
     }
-    if m.plane != crate::gcode::arc::Plane::Xy {
+    if m.plane != crate::dialect::arc::Plane::Xy {
         out.push(format!("G{}", m.plane.code()));
     }
     if !m.absolute {

@@ -6,6 +6,7 @@ pub mod bands;
 pub mod curl;
 pub mod file;
 pub mod gradient;
+pub mod image_input;
 pub mod panel;
 pub mod poisson;
 pub mod shoulders;

@@ -3,7 +3,6 @@
 
 pub mod camera;
 pub mod demo;
-pub mod image_input;
 pub mod mesh;
 pub mod raster;
 

@@ -11,16 +11,17 @@
 //! each band taking its moves in job order (which keeps the test of rapids
 //! against the stock as it was at that moment exact).
 
+use crate::cutter::dropcutter::HeightField;
+use crate::cutter::sweep::{cells_between, Sweep};
 use crate::gcode::{Kind, Program, Segment};
 use crate::grid::Grid;
 use crate::machine::Machine;
 use crate::relief::Relief;
-use crate::sweep::{cells_between, Sweep};
 use crate::tool::Tool;
-use crate::toolpath::dropcutter::HeightField;
 use glam::DVec3;
 use rayon::prelude::*;
 
+pub mod cells;
 pub mod engage;
 pub mod map;
 
@@ -720,7 +721,7 @@ pub fn deviation(
     relief: &Relief,
     at: (f64, f64),
 ) -> (f64, f64, f64, Grid<f32>) {
-    let lattice = crate::surface::Lattice::of(relief);
+    let lattice = crate::cutter::surface::Lattice::of(relief);
     let target = |x: f64, y: f64| {
         lattice
             .height_at(x, y, |i, j| *relief.heights.get(i, j) as f64)
@@ -799,8 +800,8 @@ pub fn move_gouge(
     at: (f64, f64),
     balls: bool,
 ) -> MoveGouge {
-    use crate::toolpath::along::Bottom;
-    use crate::toolpath::path::GRID;
+    use crate::cutter::along::Bottom;
+    use crate::dialect::GRID;
     let shift = DVec3::new(at.0, at.1, 0.0);
     let mut out = MoveGouge::NONE;
     for (from, to, tool) in runs {
@@ -928,7 +929,7 @@ mod tests {
         let along = move_gouge(&prog, &runs, &surface, (0.0, 0.0), true);
         assert!(at_cells < 1e-9, "cells {at_cells}");
         // (the tool taken a G-code unit narrower)
-        let expected = 0.5 * (1.0 - 0.02 - crate::toolpath::path::GRID) - 0.1;
+        let expected = 0.5 * (1.0 - 0.02 - crate::dialect::GRID) - 0.1;
         assert!((along.mm - expected).abs() < 1e-9, "{along:?}");
         assert_eq!((along.line, along.every_tool), (Some(5), true));
         let clear = format!("{}", 9.5 + 1.6);

@@ -165,7 +165,7 @@ impl Studio {
             None => Some(crate::scene::demo::scene()),
             Some((p, _)) if !is_png => Some(crate::scene::mesh::load(p)?),
             Some((p, _)) => {
-                crate::scene::image_input::load_png(p)?;
+                crate::relief::image_input::load_png(p)?;
                 None
             }
         };

@@ -9,15 +9,14 @@
 //! into straight moves as before.
 
 use super::merge::merge;
-use crate::gcode::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
+use crate::dialect::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
+use crate::dialect::MAX_RADIUS;
 use glam::DVec3;
 
 /// Fewest dropped points an arc spans (fewer: straight moves do as well).
 pub(super) const MIN_SPAN: usize = 4;
 /// Most dropped points one arc spans (the next arc goes on from there).
 const MAX_SPAN: usize = 256;
-/// Largest arc radius written (mm): flatter runs are straight moves.
-pub const MAX_RADIUS: f64 = 1000.0;
 /// Steepest tangent an arc may have in its plane (rise per run): the
 /// chords stay a function along the row.
 const MAX_SLOPE: f64 = 8.0;
@@ -420,7 +419,7 @@ mod tests {
 
     /// Moves the emitter would write: maximal runs of GRBL chords count once.
     fn runs_of(pts: &[DVec3]) -> usize {
-        let runs = crate::gcode::emit::arc_runs(pts);
+        let runs = crate::dialect::chords::arc_runs(pts);
         let chords: usize = runs.iter().map(|(i, j)| j - i).sum();
         pts.len() - 1 - chords + runs.len()
     }

@@ -9,9 +9,10 @@
 //! point on its free side (the right of travel), and on its material side
 //! only as far as keeps the CL rise there under tol / 2 (`chord_fits`).
 
-use super::arcs::{bulge, furthest, grbl_chords, MAX_RADIUS, MIN_SPAN};
+use super::arcs::{bulge, furthest, grbl_chords, MIN_SPAN};
 use super::waterline::{chord_fits, material_allowance, simplify_points};
-use crate::gcode::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
+use crate::dialect::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
+use crate::dialect::MAX_RADIUS;
 use glam::{DVec2, DVec3};
 
 /// A contour's points (all at its level) thinned for the machine: arcs
@@ -202,7 +203,7 @@ impl Band<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::gcode::emit::arc_runs;
+    use crate::dialect::chords::arc_runs;
 
     /// An island's contour (material inside, counter-clockwise) and a
     /// pocket's (clockwise), an ellipse with a wobble, dense as placed.

@@ -2,9 +2,9 @@
 //! straight move between two CL points would dip into the CL surface,
 //! and checked against the relief (thinned by `merge`).
 
-use super::along::Bottom;
-use super::dropcutter::HeightField;
 use super::merge::merge;
+use crate::cutter::along::Bottom;
+use crate::cutter::dropcutter::HeightField;
 use crate::tool::Tool;
 use glam::DVec3;
 
@@ -22,20 +22,7 @@ pub const RAMP_DEG: f64 = 5.0;
 /// Most back-and-forth legs of one ramp.
 pub const RAMP_LEGS: usize = 64;
 
-/// The resolution of coordinates in the G-code (mm).
-pub const GRID: f64 = 1e-4;
-
-/// Round to the G-code grid.
-#[inline]
-pub fn snap(v: f64) -> f64 {
-    (v / GRID).round() * GRID
-}
-
-/// Round a height up to the G-code grid (never into the material).
-#[inline]
-pub fn snap_up(v: f64) -> f64 {
-    (v / GRID - 1e-6).ceil() * GRID
-}
+pub use crate::dialect::{snap, snap_up, GRID};
 
 /// How `drop_along` refines the gaps between dropped points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -362,7 +349,7 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
 /// lower at once, and there it touches nothing. On a short move that is
 /// most of what the tool passes over.
 fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: bool) -> f64 {
-    use crate::sweep::{cells_between, Sweep};
+    use crate::cutter::sweep::{cells_between, Sweep};
     let sw = Sweep::new(a, b, *tool);
     // a level move with its ends on the CL surface sweeps only its side
     // (`Slab`), where the ball is lowest straight across
@@ -376,7 +363,7 @@ fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: b
     let Some((j0, j1)) = cells_between(hf.top - yhi, hf.top - ylo, p, z.h) else {
         return worst;
     };
-    use super::dropcutter::ROW_BLOCK;
+    use crate::cutter::dropcutter::ROW_BLOCK;
     let low_tip = a.z.min(b.z);
     let slab = Slab::new(a, b, ends_on_cl);
     for j in j0..=j1 {

@@ -5,7 +5,7 @@
 //! node to node. A raster crossing a crease leaves a zigzag in it and one
 //! along it a ridge; the pencil pass leaves one clean line.
 
-use super::dropcutter::HeightField;
+use crate::cutter::dropcutter::HeightField;
 use crate::tool::Tool;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -116,7 +116,7 @@ pub fn lines(
         };
         let gap = |t: f64| below(t).map_or(f64::NEG_INFINITY, |b| b.0);
         // 16 golden-section steps narrow [-1, 1] to under 1e-3
-        let t = super::golden_max(-1.0, 1.0, 16, gap);
+        let t = crate::cutter::golden_max(-1.0, 1.0, 16, gap);
         match below(t) {
             Some((d, p)) if d >= gap(0.0) => p,
             _ => node,

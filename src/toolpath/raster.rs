@@ -2,9 +2,9 @@
 //! each row and each link between rows dropped onto the CL surface, so the
 //! whole raster is one continuous pass.
 
-use super::dropcutter::HeightField;
 use super::merge::merge;
 use super::path::{drop_along, Refine};
+use crate::cutter::dropcutter::HeightField;
 
 /// How a row's dropped points become moves: straight moves merged within
 /// the tolerance, or arcs in the row's plane where a circle fits.

@@ -9,10 +9,10 @@
 //! already cleared to the relief, and short gaps between runs are crossed
 //! on the surface instead of by a retract.
 
-use super::dropcutter::HeightField;
 use super::path::snap;
 use super::Pass;
 use crate::bail;
+use crate::cutter::dropcutter::HeightField;
 use crate::error::Result;
 use crate::tool::Tool;
 use glam::DVec3;

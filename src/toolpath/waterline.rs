@@ -9,8 +9,8 @@
 //! contours are traced by marching squares and each crossing is then found
 //! on the exact CL surface by bisection along its grid edge.
 
-use super::dropcutter::HeightField;
 use super::path::{snap, GRID};
+use crate::cutter::dropcutter::HeightField;
 use crate::grid::Grid;
 use crate::tool::Tool;
 use glam::DVec3;
@@ -498,7 +498,7 @@ fn crossing(
 #[derive(Default)]
 pub struct Near {
     hint: Option<(usize, usize)>,
-    stack: super::dropcutter::Stack,
+    stack: crate::cutter::dropcutter::Stack,
 }
 
 /// Where the straight move between neighbouring contour points cuts the
@@ -600,8 +600,8 @@ fn peak(
     a: DVec3,
     b: DVec3,
 ) -> Option<(f64, DVec3)> {
-    use super::along::Bottom;
     use super::path::probe_gouge;
+    use crate::cutter::along::Bottom;
     if matches!(tool, Tool::Ball { .. } | Tool::TaperBall { .. }) {
         let mut stack = Vec::new();
         let mut hint = None;
@@ -779,7 +779,7 @@ pub fn clear(hf: &HeightField, tool: &Tool, pts: &[DVec3], arcs: bool) -> Vec<DV
     if arcs {
         // an arc's chords (moves i..j) share the lift of its ends too, which
         // the moves beside it set; neighbouring arcs settle in a few rounds
-        let runs = crate::gcode::emit::arc_runs(pts);
+        let runs = crate::dialect::chords::arc_runs(pts);
         for _ in 0..4 {
             let mut moved = false;
             for &(i, j) in &runs {
@@ -970,8 +970,8 @@ mod tests {
     /// chords and of the moves beside it, so it stays one arc.
     #[test]
     fn clear_lifts_an_arc_as_one() {
-        use crate::gcode::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
-        use crate::gcode::emit::arc_run;
+        use crate::dialect::arc::{Arc, Plane, GRBL_ARC_TOLERANCE};
+        use crate::dialect::chords::arc_run;
         let hf = HeightField::new(Grid::new(60, 60, 0.0), 0.25);
         let tool = Tool::parse("ball:2").unwrap();
         let arc = Arc {

@@ -176,7 +176,7 @@ pub fn grbl_lines(text: &str) -> Vec<String> {
 /// Lowest surface a tool can reach over each sample: the envelope of the
 /// tool placed on the CL surface at every sample centre.
 pub fn reachable(
-    hf: &relievo::toolpath::dropcutter::HeightField,
+    hf: &relievo::cutter::dropcutter::HeightField,
     tool: &relievo::tool::Tool,
     w: usize,
     h: usize,

@@ -654,7 +654,7 @@ impl SimGrbl {
                         // taken until it has room again)
                         Some(a) => {
                             let pts =
-                                a.points(step.from, to, crate::gcode::arc::GRBL_ARC_TOLERANCE);
+                                a.points(step.from, to, crate::dialect::arc::GRBL_ARC_TOLERANCE);
                             let mut from = step.from;
                             for (k, q) in pts.iter().enumerate() {
                                 let l = if k + 1 == pts.len() {

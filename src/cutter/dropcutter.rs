@@ -20,8 +20,8 @@
 //! docs/benchmarks.md, "The plane bound").
 
 use super::along::Bottom;
+use crate::cutter::surface::Lattice;
 use crate::grid::Grid;
-use crate::surface::Lattice;
 use crate::tool::Tool;
 
 /// Heights (Z frame, mm) of samples at centres x = (i + 0.5) p,
@@ -854,7 +854,7 @@ fn block_planes(
 /// the rectangle's corners.
 fn segment_rect_d2(a: (f64, f64), b: (f64, f64), (x0, y0, x1, y1): (f64, f64, f64, f64)) -> f64 {
     let (dx, dy) = (b.0 - a.0, b.1 - a.1);
-    if crate::sweep::clip_to_rect(a, (dx, dy), [x0, y0, x1, y1]).is_some() {
+    if crate::cutter::sweep::clip_to_rect(a, (dx, dy), [x0, y0, x1, y1]).is_some() {
         return 0.0;
     }
     let to_rect = |x: f64, y: f64| {
@@ -958,7 +958,7 @@ mod tests {
     /// Golden-section search for the maximum of a concave function on
     /// [lo, hi]: (argmax, max).
     fn golden(lo: f64, hi: f64, f: impl Fn(f64) -> f64) -> (f64, f64) {
-        let mid = crate::toolpath::golden_max(lo, hi, 64, &f);
+        let mid = crate::cutter::golden_max(lo, hi, 64, &f);
         [(lo, f(lo)), (hi, f(hi)), (mid, f(mid))].into_iter().fold(
             (lo, f64::NEG_INFINITY),
             |m, p| if p.1 > m.1 { p } else { m },

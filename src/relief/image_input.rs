@@ -1,11 +1,11 @@
 //! Image models: a grayscale depth PNG (white = near) becomes a depth map;
 //! an RGB normal map (tangent space, +Y up) becomes a slope field.
 
-use super::raster::DepthMap;
+use super::file::decode;
+use super::gradient::SlopeSource;
 use crate::error::Result;
 use crate::grid::Grid;
-use crate::relief::file::decode;
-use crate::relief::gradient::SlopeSource;
+use crate::scene::raster::DepthMap;
 use std::path::Path;
 
 pub enum ImageModel {
