@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 use relievo::cutter::dropcutter::HeightField;
-use relievo::job::ReliefJob;
+use relievo::ops::relief::ReliefJob;
 use relievo::tool::Tool;
 use std::time::Instant;
 

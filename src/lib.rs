@@ -9,8 +9,8 @@ pub mod error;
 pub mod export;
 pub mod grid;
 pub mod input;
-pub mod job;
 pub mod materials;
+pub mod ops;
 pub mod output;
 pub mod preview;
 pub mod progress;
@@ -25,7 +25,6 @@ pub mod gcode;
 pub mod grbl;
 pub mod machine;
 pub mod sim;
-pub mod simulate;
 pub mod studio;
 
 #[cfg(test)]

@@ -5,11 +5,11 @@
 
 mod common;
 use common::*;
-use relievo::grbl::job::SendJob;
 use relievo::grbl::port::MemPort;
 use relievo::grbl::sender;
 use relievo::grbl::sim::{Faults, SimGrbl};
 use relievo::machine::Machine;
+use relievo::ops::send::SendJob;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 

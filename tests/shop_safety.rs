@@ -579,7 +579,8 @@ fn the_pad_stands_through_roughing_and_z0_bottom_cuts_the_same() {
 /// the simulated GRBL runs every line of it.
 #[test]
 fn an_inch_job_cuts_what_the_mm_job_cuts() {
-    use relievo::grbl::{job::SendJob, port::MemPort, sim::SimGrbl};
+    use relievo::grbl::{port::MemPort, sim::SimGrbl};
+    use relievo::ops::send::SendJob;
     let d = scratch("safe-inch");
     let (mm, inch) = (d.join("mm.nc"), d.join("in.nc"));
     let relief = d.join("mm-relief.png");

@@ -3,7 +3,7 @@
 
 use super::print_timings;
 use clap::Args;
-use relievo::job::ReliefJob;
+use relievo::ops::relief::ReliefJob;
 use relievo::progress::Progress;
 use relievo::relief::{Background, Method};
 use relievo::scene::{Camera, Up, View};
@@ -135,7 +135,7 @@ pub struct ReliefOpts {
 /// type chose it (so that a model lying on its back is explained), the
 /// background when the picture chose to hold it flat, and the relief's
 /// warnings.
-pub fn say_notes(job: &ReliefJob, made: &relievo::job::Summary, quiet: bool) {
+pub fn say_notes(job: &ReliefJob, made: &relievo::ops::relief::Summary, quiet: bool) {
     let mesh = job.model.is_some() && !job.model_is("png");
     if let (false, (up, true), true) = (quiet, job.up(), mesh) {
         let kind = if up == Up::Z { "STL" } else { "OBJ" };

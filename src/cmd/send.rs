@@ -65,7 +65,8 @@ extern "C" fn on_sigint(_: libc::c_int) {
 }
 
 pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
-    use relievo::grbl::{job::SendJob, port::SerialLink};
+    use relievo::grbl::port::SerialLink;
+    use relievo::ops::send::SendJob;
     let job = SendJob {
         job: args.job,
         check: args.check,

@@ -58,7 +58,7 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
-    let job = relievo::simulate::SimulateJob {
+    let job = relievo::ops::simulate::SimulateJob {
         jobs: args.jobs,
         relief: args.relief,
         relief_width: args.width,

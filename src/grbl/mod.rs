@@ -2,7 +2,6 @@
 //! simulated machine the sender is tested against, the port it talks
 //! through and the sender itself.
 
-pub mod job;
 mod lines;
 pub mod port;
 mod replies;

@@ -5,7 +5,7 @@
 use crate::bail;
 use crate::cam::{self, Finish, Origin, Stepover, ToolpathJob};
 use crate::error::Result;
-use crate::job::ReliefJob;
+use crate::ops::relief::ReliefJob;
 use crate::relief::{Background, Method};
 use crate::scene::{Camera, Up, View};
 use clap::ValueEnum;
@@ -205,7 +205,7 @@ impl ReliefSettings {
         l.switch("invert", self.invert);
         match self.smooth {
             None => l.switch("faceted", true),
-            Some(a) => l.num("smooth", a, crate::job::DEFAULT_CREASE),
+            Some(a) => l.num("smooth", a, crate::ops::relief::DEFAULT_CREASE),
         }
         l.text("fade", &self.fade);
         l.text("tilt", &self.tilt);

@@ -7,11 +7,11 @@
 use super::settings::{carve_command, relief_command, CutSettings, ReliefSettings};
 use crate::bail;
 use crate::error::{Error, Result};
-use crate::job::{ReliefJob, Sight};
+use crate::ops::relief::{ReliefJob, Sight};
+use crate::ops::simulate::{SimSummary, SimulateJob};
 use crate::relief::gradient::Field;
 use crate::relief::{file, Params, Relief};
 use crate::scene::mesh::Mesh;
-use crate::simulate::{SimSummary, SimulateJob};
 use crate::timing::Timings;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering::SeqCst};

@@ -3,12 +3,12 @@
 //! clear error saying where it stopped, what is known to have run and how
 //! to resume.
 
-use super::port::Port;
-use super::resume::{reentry, resume_point, standing};
-use super::sender::{self, JobLine, Options, Outcome, Replies};
-use super::state::State;
 use crate::bail;
 use crate::error::Result;
+use crate::grbl::port::Port;
+use crate::grbl::resume::{reentry, resume_point, standing};
+use crate::grbl::sender::{self, JobLine, Options, Outcome, Replies};
+use crate::grbl::state::State;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
 
@@ -124,7 +124,7 @@ impl SendJob {
         }
         if self.resume.is_none() && self.resume_from.is_none() {
             // a fresh run starts a fresh journal
-            super::resume::Journal::open(&journal, true)?;
+            crate::grbl::resume::Journal::open(&journal, true)?;
         }
         let preamble = if start > 0 {
             reentry(&lines, start)
