@@ -227,7 +227,7 @@ fn bad_uploads_and_requests_leave_the_studio_serving() {
             "/api/relief",
             r#"{"relief": {"colour": 3}}"#,
             400,
-            "unknown field",
+            "unknown setting",
         ),
         (
             "/api/relief",

@@ -1,8 +1,9 @@
 //! `relievo carve`: relief and job in one call, all or nothing.
 
-use super::relief::ReliefOpts;
-use super::toolpath::{report, CutOpts};
+use super::relief::ReliefFiles;
+use super::toolpath::{report, CutFiles};
 use clap::Args;
+use relievo::ops::settings::{CutSettings, ReliefSettings};
 use std::path::PathBuf;
 
 /// What `--help` ends with.
@@ -19,9 +20,13 @@ pub struct CarveArgs {
     #[arg(short, long, default_value = "job.nc")]
     pub output: PathBuf,
     #[command(flatten)]
-    pub relief: ReliefOpts,
+    pub relief: ReliefSettings,
     #[command(flatten)]
-    pub cut: CutOpts,
+    pub relief_files: ReliefFiles,
+    #[command(flatten)]
+    pub cut: CutSettings,
+    #[command(flatten)]
+    pub cut_files: CutFiles,
 }
 
 /// `relievo carve`.
@@ -33,12 +38,14 @@ pub fn run(args: CarveArgs, quiet: bool, verbose: bool) -> relievo::Result<()> {
         .unwrap_or("job".into());
     let relief_path = args.output.with_file_name(format!("{stem}-relief.png"));
     let material = args.relief.material.clone();
-    let rjob = args.relief.job(args.model, relief_path.clone());
-    let cam = args.cut.job(
+    let mut rjob = args.relief.job(args.model, relief_path.clone());
+    args.relief_files.onto(&mut rjob);
+    let mut cam = args.cut.job(
         args.output.clone(),
         relief_path.display().to_string(),
         material,
     );
+    args.cut_files.onto(&mut cam);
     relievo::output::check_writable(&args.output)?;
     // the job's flags before the relief: a bad one is one error line
     cam.check()?;

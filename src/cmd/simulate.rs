@@ -1,7 +1,8 @@
 //! `relievo simulate`: judge any G-code job against a relief.
 
-use super::{parse_pair, parse_stock, print_timings, with_spinner};
+use super::{print_timings, with_spinner};
 use clap::Args;
+use relievo::ops::settings::{parse_pair, parse_stock};
 use std::path::PathBuf;
 
 /// What `--help` ends with.

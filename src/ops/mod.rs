@@ -13,5 +13,6 @@
 
 pub mod relief;
 pub mod send;
+pub mod settings;
 pub mod simulate;
 pub mod toolpath;

@@ -232,9 +232,15 @@ fn percent_decode(s: &str) -> String {
     String::from_utf8_lossy(&out).into_owned()
 }
 
-/// What the page sends to make a relief or a job.
+/// What the page sends to make a relief or a job: each kind of settings
+/// as a JSON object, read by the command line's definition.
 #[derive(serde::Deserialize, Default)]
 #[serde(default, deny_unknown_fields)]
+struct Sent {
+    relief: serde_json::Map<String, serde_json::Value>,
+    cut: serde_json::Map<String, serde_json::Value>,
+}
+
 struct Ask {
     relief: ReliefSettings,
     cut: CutSettings,
@@ -242,7 +248,13 @@ struct Ask {
 
 fn ask(rq: &mut Request) -> Result<Ask, Reply> {
     let b = body(rq, MAX_JSON)?;
-    serde_json::from_slice(&b).map_err(|e| Reply::error(400, format!("bad settings: {e}")))
+    let sent: Sent =
+        serde_json::from_slice(&b).map_err(|e| Reply::error(400, format!("bad settings: {e}")))?;
+    let bad = |e: crate::Error| Reply::error(400, e.0);
+    Ok(Ask {
+        relief: ReliefSettings::from_json(&sent.relief.into()).map_err(bad)?,
+        cut: CutSettings::from_json(&sent.cut.into()).map_err(bad)?,
+    })
 }
 
 fn failed(f: Fail) -> Reply {

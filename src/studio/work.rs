@@ -79,7 +79,7 @@ pub struct JobMade {
 /// shaped field, kept while the compression and the silhouette stay too.
 struct Seen {
     model_version: u64,
-    key: ReliefSettings,
+    key: crate::ops::settings::ReliefSettings,
     sight: Arc<Sight>,
     shaped: Option<((f64, f64), Arc<Shaped>)>,
 }
@@ -106,18 +106,20 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 /// The settings that decide what the camera sees.
-fn sight_key(s: &ReliefSettings) -> ReliefSettings {
-    ReliefSettings {
-        view: s.view.clone(),
-        up: s.up.clone(),
+fn sight_key(s: &ReliefSettings) -> crate::ops::settings::ReliefSettings {
+    crate::ops::settings::ReliefSettings {
+        view: s.view,
+        up: s.up,
         yaw: s.yaw,
         pitch: s.pitch,
         roll: s.roll,
         fov: s.fov,
         resolution: s.resolution,
         smooth: s.smooth,
-        background: s.background,
-        ..ReliefSettings::default()
+        faceted: s.faceted,
+        flat_background: s.flat_background,
+        free_background: s.free_background,
+        ..crate::ops::settings::ReliefSettings::default()
     }
 }
 
@@ -270,7 +272,10 @@ impl Studio {
                 s.resolution
             ))));
         }
-        let job = s.job(model.path.clone(), self.dir.join("relief.png"))?;
+        let job = s
+            .settings
+            .clone()
+            .job(model.path.clone(), self.dir.join("relief.png"));
         let mut params = job.validate()?;
         let mut t = Timings::default();
         let key = sight_key(s);
@@ -348,12 +353,12 @@ impl Studio {
         write(&relief_path, &png)?;
         write(&file::sidecar_path(&relief_path), &json)?;
         let nc = dir.join("job.nc");
-        let tp = c.job(
+        let mut tp = c.settings.clone().job(
             nc.clone(),
-            dir.join("job.svg"),
             "relief.png".into(),
             made.settings.material.clone(),
-        )?;
+        );
+        tp.svg = Some(dir.join("job.svg"));
         let summary = tp.run(&made.relief)?;
         self.live(ticket)?;
         let sim = SimulateJob {
@@ -424,6 +429,11 @@ impl Drop for Studio {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use serde_json::json;
+
+    fn relief(v: serde_json::Value) -> ReliefSettings {
+        ReliefSettings::from_json(&v).unwrap()
+    }
 
     fn stages(m: &Made) -> Vec<&str> {
         m.timings.stages.iter().map(|s| s.0.as_str()).collect()
@@ -437,25 +447,22 @@ mod tests {
     #[test]
     fn only_the_camera_renders_again() {
         let s = studio("reuse");
-        let mut r = ReliefSettings {
-            resolution: 64,
-            ..Default::default()
-        };
+        let r = relief(json!({"resolution": 64}));
         let first = s.relief(&r).unwrap();
         assert!(stages(&first).contains(&"rasterize"));
         // depth: neither rendered nor shaped again
-        r.depth = Some(2.0);
+        let r = relief(json!({"resolution": 64, "depth": 2.0}));
         let second = s.relief(&r).unwrap();
         assert_eq!(stages(&second), ["poisson"]);
         assert_eq!(second.relief.depth_mm, 2.0);
         // the same settings: the same relief, nothing made
         assert!(Arc::ptr_eq(&second, &s.relief(&r).unwrap()));
         // compression: shaped again from the same rendering
-        r.alpha = Some(8.0);
+        let r = relief(json!({"resolution": 64, "depth": 2.0, "alpha": 8.0}));
         let third = s.relief(&r).unwrap();
         assert!(stages(&third).contains(&"gradients") && !stages(&third).contains(&"rasterize"));
         // the view: rendered again
-        r.yaw = 10.0;
+        let r = relief(json!({"resolution": 64, "depth": 2.0, "alpha": 8.0, "yaw": 10.0}));
         assert!(stages(&s.relief(&r).unwrap()).contains(&"rasterize"));
         // a new model: nothing of the old one is reused
         s.open(None).unwrap();
@@ -494,10 +501,7 @@ mod tests {
     #[test]
     fn an_overtaken_request_is_dropped_not_queued() {
         let s = Arc::new(studio("drop"));
-        let r = ReliefSettings {
-            resolution: 64,
-            ..Default::default()
-        };
+        let r = relief(json!({"resolution": 64}));
         // hold the bench so that both requests wait, the older first
         let one = lock(&s.work);
         let wait_for = |n: u64| {
@@ -512,8 +516,7 @@ mod tests {
         };
         wait_for(before + 1);
         let newer = {
-            let (s, mut r) = (s.clone(), r.clone());
-            r.depth = Some(1.0);
+            let (s, r) = (s.clone(), relief(json!({"resolution": 64, "depth": 1.0})));
             std::thread::spawn(move || s.relief(&r))
         };
         wait_for(before + 2);
@@ -522,10 +525,7 @@ mod tests {
         let made = newer.join().unwrap().unwrap();
         assert_eq!(made.relief.depth_mm, 1.0);
         // a bad setting is an error, not a dropped request
-        let bad = ReliefSettings {
-            fade: Some("sideways".into()),
-            ..r
-        };
+        let bad = relief(json!({"resolution": 64, "fade": "sideways"}));
         assert!(matches!(s.relief(&bad), Err(Fail::Bad(_))));
     }
 }

@@ -63,6 +63,8 @@ async function call(url, opts) {
 }
 
 // ---- settings --------------------------------------------------------
+// Sent by the command line's own names (its flags, as snake_case fields);
+// the server reads them with the command line's definition.
 
 function num(id) { return parseFloat($(id).value); }
 
@@ -74,7 +76,8 @@ function reliefSettings() {
     resolution: parseInt($('resolution').value, 10),
     width: num('width'),
     silhouette: num('silhouette'),
-    background: $('background').value,
+    flat_background: $('background').value === 'flat',
+    free_background: $('background').value === 'free',
     mirror: $('mirror').checked,
     invert: $('invert').checked,
     method: $('method').value,
@@ -83,6 +86,7 @@ function reliefSettings() {
     alpha: S.touched.has('alpha') ? num('alpha') : null,
     steps: $('steps-on').checked ? num('steps') : null,
     smooth: $('smooth-on').checked ? num('smooth') : null,
+    faceted: !$('smooth-on').checked,
     fade: $('fade').value.trim() || null,
     tilt: $('tilt').value.trim() || null,
     emphasize: [],
