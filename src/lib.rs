@@ -1,6 +1,9 @@
 //! relievo: 3D scenes to bas-reliefs (Weyrich et al. 2007) and
 //! bas-reliefs to CNC jobs. Data flows one way:
-//! scene -> relief -> (toolpath -> gcode -> sim / grbl).
+//! scene -> relief -> (toolpath -> gcode -> sim / grbl), in layers that
+//! import only from below (docs/architecture.md): foundations, scene,
+//! relief, dialect, cutter, gcode, toolpath, sim, grbl, cam, then `ops`,
+//! the jobs each command runs as one call.
 
 pub mod cam;
 pub mod cutter;
