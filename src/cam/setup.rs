@@ -217,14 +217,10 @@ impl ToolpathJob {
         {
             check_writable(o)?;
         }
-        let Setup {
-            machine,
-            material,
-            tool,
-            step,
-            rough_tool,
-            rest_tool,
-        } = self.setup()?;
+        let setup = self.setup()?;
+        let (machine, material, tool, step) =
+            (setup.machine, setup.material, setup.tool, setup.step);
+        let (rough_tool, rest_tool) = (setup.rough_tool, setup.rest_tool);
         let limits = Limits {
             material: match &material {
                 Some(mt) => mt.clone(),

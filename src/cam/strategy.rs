@@ -157,7 +157,8 @@ impl ToolpathJob {
     /// Pencil passes of `tool` along the valleys of its CL surface over
     /// `region` that bend up by at least `kappa` (1/mm), where `keep`
     /// holds: merged, checked, and toured from `start`. Returns the passes
-    /// and the CL points dropped.
+    /// and the CL points dropped. (Its parameters are `pencil::lines`'
+    /// again, deliberately: it passes them through and adds the tour.)
     #[allow(clippy::too_many_arguments)]
     pub(super) fn pencil(
         &self,

@@ -196,14 +196,8 @@ impl Emitter {
             }
         }
         self.motion = Some(g);
-        if !rapid && self.feed != Some(feed) {
-            let f = if self.inch {
-                num_dec(feed / 25.4, 2)
-            } else {
-                num(feed.round())
-            };
-            write!(l, " F{f}").unwrap();
-            self.feed = Some(feed);
+        if !rapid {
+            self.feed_word(&mut l, feed);
         }
         self.pos = Some(p);
         self.line(l);
@@ -312,15 +306,7 @@ impl Emitter {
             )
             .unwrap();
         }
-        if self.feed != Some(feed) {
-            let f = if self.inch {
-                num_dec(feed / 25.4, 2)
-            } else {
-                num(feed.round())
-            };
-            write!(l, " F{f}").unwrap();
-            self.feed = Some(feed);
-        }
+        self.feed_word(&mut l, feed);
         self.pos = Some(to);
         self.line(l);
         true
@@ -375,6 +361,19 @@ impl Emitter {
         self.line(format!("M3 S{}", num(s.rpm.round())));
         if s.dwell > 0.0 {
             self.line(format!("G4 P{}", num(s.dwell)));
+        }
+    }
+
+    /// The F word, where the feed changes (modal otherwise).
+    fn feed_word(&mut self, l: &mut String, feed: f64) {
+        if self.feed != Some(feed) {
+            let f = if self.inch {
+                num_dec(feed / 25.4, 2)
+            } else {
+                num(feed.round())
+            };
+            write!(l, " F{f}").unwrap();
+            self.feed = Some(feed);
         }
     }
 

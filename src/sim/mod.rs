@@ -236,7 +236,9 @@ fn ball_rows<const STATS: bool>(
     ball_rows_body::<STATS>(stock, rows, ja, w, sw, continues, floor, mc)
 }
 
-/// The same loops compiled for 8-lane AVX2 vectors.
+/// The same loops compiled for 8-lane AVX2 vectors. (Its signature is
+/// `ball_rows`' and `ball_rows_body`'s again, deliberately: one dispatches,
+/// one is compiled for AVX2, one holds the loops.)
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 #[allow(clippy::too_many_arguments)]

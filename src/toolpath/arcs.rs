@@ -364,6 +364,12 @@ fn band_error(
         };
         dip = dip.max(p.1 + (q.1 - p.1) * s - c.z);
     }
+    verdict(dip, over)
+}
+
+/// Ok where the chords neither dip below the CL points nor rise over
+/// them by more than allowed, else by how much (mm).
+pub(super) fn verdict(dip: f64, over: f64) -> Result<(), (f64, f64)> {
     if dip > 0.0 || over > 0.0 {
         Err((dip.max(0.0), over.max(0.0)))
     } else {

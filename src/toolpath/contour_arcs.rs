@@ -192,11 +192,7 @@ impl Band<'_> {
             let m = self.allowance(a + k).min(self.allowance(a + k + 1));
             check(&p, k, c, -1.0, m);
         }
-        if dip > 0.0 || over > 0.0 {
-            Err((dip.max(0.0), over.max(0.0)))
-        } else {
-            Ok(())
-        }
+        super::arcs::verdict(dip, over)
     }
 }
 
