@@ -143,18 +143,16 @@ impl Machine {
     /// `finish`: the largest up to 1/4 in, so that it clears fast and still
     /// reaches between the relief's forms. (name, spec)
     pub fn roughing_tool(&self, finish: &crate::tool::Tool) -> Option<(String, String)> {
-        use crate::tool::Tool;
-        if matches!(finish, Tool::Flat { .. }) {
+        if finish.is_flat() {
             return None;
         }
-        self.largest(|t| matches!(t, Tool::Flat { .. }))
+        self.largest(|t| t.is_flat())
     }
 
     /// The ball in the tool table to finish with ahead of a smaller
     /// `tool` (then a rest tool): the largest up to 1/4 in. (name, spec)
     pub fn finishing_ball(&self, tool: &crate::tool::Tool) -> Option<(String, String)> {
-        use crate::tool::Tool;
-        self.largest(|t| matches!(t, Tool::Ball { .. }) && t.radius() > tool.radius())
+        self.largest(|t| t.is_ball() && t.radius() > tool.radius())
     }
 
     /// The largest tool up to 1/4 in of the table that `pick` takes.

@@ -345,6 +345,43 @@ impl Tool {
         }
     }
 
+    /// A ball end mill.
+    pub fn is_ball(&self) -> bool {
+        matches!(self, Tool::Ball { .. })
+    }
+
+    /// A flat end mill.
+    pub fn is_flat(&self) -> bool {
+        matches!(self, Tool::Flat { .. })
+    }
+
+    /// A V-bit: a sharp point, its CL surface creased.
+    pub fn is_vbit(&self) -> bool {
+        matches!(self, Tool::VBit { .. })
+    }
+
+    /// The radius of a rounded tip (a ball's, a tapered ball's), which
+    /// leaves scallops and a CL surface without creases; None for a flat
+    /// end or a V-bit.
+    pub fn tip_radius(&self) -> Option<f64> {
+        match *self {
+            Tool::Ball { d } => Some(d / 2.0),
+            Tool::TaperBall { tip_r, .. } => Some(tip_r),
+            _ => None,
+        }
+    }
+
+    /// The same kind of end mill, `by` mm wider all round (a roughing
+    /// tool that leaves stock to the finish); None for a tool other than a
+    /// flat or ball end mill.
+    pub fn grown(&self, by: f64) -> Option<Tool> {
+        match *self {
+            Tool::Flat { d } => Some(Tool::Flat { d: d + 2.0 * by }),
+            Tool::Ball { d } => Some(Tool::Ball { d: d + 2.0 * by }),
+            _ => None,
+        }
+    }
+
     /// The spec string that parses back to this tool.
     pub fn spec(&self) -> String {
         match *self {

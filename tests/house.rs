@@ -229,3 +229,23 @@ fn functions_and_files_stay_walkable() {
     }
     assert!(long.is_empty(), "too long to walk: {long:#?}");
 }
+
+#[test]
+fn the_tools_shape_is_matched_only_where_its_geometry_is() {
+    let mut outside = Vec::new();
+    for (file, src) in sources() {
+        if file == "tool.rs" || file.starts_with("cutter/") {
+            continue;
+        }
+        let code = code_only(&src);
+        for shape in ["Tool::Ball", "Tool::Flat", "Tool::VBit", "Tool::TaperBall"] {
+            for (k, _) in production(&code).match_indices(shape) {
+                outside.push(format!("{file}:{}: {shape}", code[..k].lines().count()));
+            }
+        }
+    }
+    assert!(
+        outside.is_empty(),
+        "ask the tool's methods instead: {outside:#?}"
+    );
+}

@@ -47,7 +47,7 @@ pub fn run(
         let shifted = prog.lowered(z_shift);
         let (_, m, runs) = sim::cut_program_measured(&stock, &mut cut, &shifted, None)?;
         engagement.absorb(Engagement::measure(&shifted, &m, &runs, stock.pitch));
-        if runs.iter().any(|r| matches!(r.2, Tool::Flat { .. })) {
+        if runs.iter().any(|r| r.2.is_flat()) {
             let surface = surface.get_or_insert_with(|| HeightField::of_relief(relief));
             along = along.max(sim::move_gouge(&shifted, &runs, surface, at, false).mm);
         }

@@ -105,10 +105,8 @@ impl Stepover {
             Stepover::Mm(v) => v,
             Stepover::Percent(p) => p / 100.0 * d,
             Stepover::Scallop(h) => {
-                let r = match *tool {
-                    Tool::Ball { d } => d / 2.0,
-                    Tool::TaperBall { tip_r, .. } => tip_r,
-                    _ => bail!("--scallop needs a ball or tapered ball tool"),
+                let Some(r) = tool.tip_radius() else {
+                    bail!("--scallop needs a ball or tapered ball tool");
                 };
                 if !(h > 0.0 && h < r) {
                     bail!("--scallop {h}: must be between 0 and the ball radius");

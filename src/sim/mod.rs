@@ -470,7 +470,7 @@ fn cut_impl<const STATS: bool>(
                 let sw = Sweep::new(seg.a, seg.b, tool);
                 let rapid = seg.kind == Kind::Rapid;
                 let mut mc = MoveCut::NONE;
-                if !rapid && matches!(tool, Tool::Ball { .. }) {
+                if !rapid && tool.is_ball() {
                     let continues = k > 0 && segs[k as usize - 1].b == seg.a;
                     ball_rows::<STATS>(stock, rows, ja, w, &sw, continues, floor, &mut mc);
                     if STATS && mc.axial > 0.0 {

@@ -255,10 +255,10 @@ fn dropped_move_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, drops: 
 /// flank makes peaks over vertices, so its probes stay at least two a
 /// sample.
 fn probe_spacing(hf: &HeightField, tool: &Tool) -> f64 {
-    match *tool {
-        Tool::Ball { d } => (2.0 * CHECK * d).sqrt(),
-        Tool::TaperBall { tip_r, .. } => (4.0 * CHECK * tip_r).sqrt().min(0.5 * hf.pitch),
-        _ => 0.5 * hf.pitch,
+    match tool.tip_radius() {
+        Some(r) if tool.is_ball() => (4.0 * CHECK * r).sqrt(),
+        Some(r) => (4.0 * CHECK * r).sqrt().min(0.5 * hf.pitch),
+        None => 0.5 * hf.pitch,
     }
 }
 
@@ -309,7 +309,7 @@ pub fn probe_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, floor: f64
     };
     // a ball's or tapered tip's CL surface has no creases (each triangle
     // holds it on a smooth surface): the curvature spacing alone will do
-    if matches!(tool, Tool::VBit { .. }) {
+    if tool.is_vbit() {
         cross(a.x, d.x, 0.5 * p);
         cross(top - a.y, -d.y, 0.5 * p);
         cross(a.x + top - a.y, d.x - d.y, 0.0);
@@ -353,7 +353,8 @@ fn sample_gouge(hf: &HeightField, tool: &Tool, a: DVec3, b: DVec3, ends_on_cl: b
     let sw = Sweep::new(a, b, *tool);
     // a level move with its ends on the CL surface sweeps only its side
     // (`Slab`), where the ball is lowest straight across
-    let ball = matches!(tool, Tool::Ball { .. })
+    let ball = tool
+        .is_ball()
         .then(|| BallSweep::new(a, b, sw.r, ends_on_cl && a.z == b.z));
     let z = hf.samples();
     let p = hf.pitch;
@@ -599,8 +600,8 @@ pub fn check_and_refine(
     if pts.len() < 2 {
         return pts.to_vec();
     }
-    let over = match (tool, drops) {
-        (Tool::Ball { .. }, Some(drops)) => stretches(pts, drops).map(|s| (drops, s)),
+    let over = match drops {
+        Some(drops) if tool.is_ball() => stretches(pts, drops).map(|s| (drops, s)),
         _ => None,
     };
     let fixes: Vec<Option<Vec<DVec3>>> = pts
@@ -629,8 +630,8 @@ pub fn check_and_refine(
             let m = merge(&cl, tol);
             // a ball's moves over the points just dropped: those are its
             // probes, as for the row
-            Some(match (tool, stretches(&m, &cl)) {
-                (Tool::Ball { .. }, Some(s)) => {
+            Some(match stretches(&m, &cl).filter(|_| tool.is_ball()) {
+                Some(s) => {
                     let g = m
                         .windows(2)
                         .zip(&s)

@@ -87,13 +87,12 @@ pub fn passes(hf: &HeightField, floor: f64, p: &Params) -> Result<Vec<Pass>> {
         Some((low, z)) => (low, *z),
         None => (hf, None),
     };
-    let big = match p.tool {
-        t if stl == 0.0 => t,
-        Tool::Flat { d } => Tool::Flat { d: d + 2.0 * stl },
-        Tool::Ball { d } => Tool::Ball { d: d + 2.0 * stl },
-        t => bail!(
+    let big = match p.tool.grown(stl) {
+        _ if stl == 0.0 => p.tool,
+        Some(t) => t,
+        None => bail!(
             "--rough {}: roughing takes a flat or ball end mill",
-            t.spec()
+            p.tool.spec()
         ),
     };
     let bottom = background.unwrap_or(floor + stl);

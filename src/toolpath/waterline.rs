@@ -602,7 +602,7 @@ fn peak(
 ) -> Option<(f64, DVec3)> {
     use super::path::probe_gouge;
     use crate::cutter::along::Bottom;
-    if matches!(tool, Tool::Ball { .. } | Tool::TaperBall { .. }) {
+    if tool.tip_radius().is_some() {
         let mut stack = Vec::new();
         let mut hint = None;
         let mut top: Option<(f64, DVec3)> = None;
