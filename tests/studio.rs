@@ -327,3 +327,63 @@ fn another_site_cannot_use_the_studio() {
     let page = format!("http://127.0.0.1:{port}");
     assert_eq!(ask("POST", "/api/demo", &ours, Some(&page)).0, 200);
 }
+
+/// The page holds every setting of the command line's relief and cutting
+/// definition: its own controls, and the More section built from the
+/// definition the server describes (so a setting added to the definition
+/// appears here with nothing else to write). A setting set there reaches
+/// the job and its command line.
+#[test]
+fn every_setting_of_the_command_line_is_in_the_page() {
+    use relievo::ops::settings::{CutSettings, Given, ReliefSettings, FILE_MAKING};
+    let dir = scratch("studio-settings");
+    let Some(b) = Browser::start(&dir) else {
+        return;
+    };
+    let studio = Studio::start(&[]);
+    b.goto(&studio.url);
+    b.wait("the demo relief", 60, || relief_at(&b, 512).then_some(()));
+    let names = |js: &str| -> Vec<String> { serde_json::from_value(b.script(js)).unwrap() };
+    let mut shown = names(
+        "const own = (a) => [...document.querySelectorAll(`[data-${a}]`)].map(e => e.dataset[a]);
+         return Object.keys(reliefSettings()).concat(Object.keys(cutSettings()), own('k'), own('c'))",
+    );
+    let more =
+        names("return [...document.querySelectorAll('[data-more]')].map(e => e.dataset.name)");
+    assert!(more.len() >= 20, "the More section holds {more:?}");
+    shown.extend(more);
+    for name in Given::<ReliefSettings>::names()
+        .into_iter()
+        .chain(Given::<CutSettings>::names())
+        .filter(|n| !FILE_MAKING.contains(&n.as_str()))
+    {
+        assert!(
+            shown.contains(&name),
+            "the page has no control for the setting '{name}'"
+        );
+    }
+    // a relief setting and a cutting one from the More section
+    b.click("#more summary");
+    b.keys("#resolution", "256");
+    b.keys("#more-relief [data-name=base]", "3.5");
+    b.keys("#more-cut [data-name=safe_z]", "8");
+    let section = b.shot("#more");
+    section.save(dir.join("more-settings.png")).unwrap();
+    let (ink, sd) = contrast(&section);
+    eprintln!("More section: {ink:.3} of its pixels inked, sd {sd:.1}");
+    assert!(
+        ink > 0.02 && sd > 10.0,
+        "the More section looks blank ({ink}, {sd})"
+    );
+    b.click("#tabs button[data-tab=job]");
+    let command = b.wait("the job's command line with both settings", 240, || {
+        let c = b.text("#command");
+        (c.contains("--base 3.5") && c.contains("--safe-z 8")).then_some(c)
+    });
+    eprintln!("command: {command}");
+    let summary = b.wait("the job's summary", 240, || {
+        let s = b.text("#summary");
+        s.contains("lines").then_some(s)
+    });
+    assert!(!status(&b).1, "{summary}");
+}

@@ -418,6 +418,11 @@ pub fn parse_pair(s: &str) -> std::result::Result<(f64, f64), String> {
     }
 }
 
+/// Settings that change which files a job makes (roughing in a file of its
+/// own, one file per tile): the command line's, not a page's, which offers
+/// one job file.
+pub const FILE_MAKING: &[&str] = &["split", "tile"];
+
 /// The settings of one kind alone, as a command line of their own.
 #[derive(Parser)]
 #[command(no_binary_name = true)]
@@ -484,6 +489,27 @@ impl<T: Args + FromArgMatches> Given<T> {
             settings: parsed.settings,
             flags,
         })
+    }
+
+    /// Every setting as a page shows it: its name, flag, help, default,
+    /// the values it takes (when they are few) and whether it is a switch;
+    /// `page` false for one that makes files a page does not offer.
+    pub fn describe() -> Vec<Value> {
+        Only::<T>::command()
+            .get_arguments()
+            .map(|a| {
+                let name = a.get_id().to_string();
+                serde_json::json!({
+                    "name": name,
+                    "flag": format!("--{}", a.get_long().unwrap_or(&name)),
+                    "help": a.get_help().map(|h| h.to_string()).unwrap_or_default(),
+                    "default": a.get_default_values().first().map(|d| d.to_string_lossy().into_owned()),
+                    "values": a.get_possible_values().iter().map(|v| v.get_name().to_string()).collect::<Vec<_>>(),
+                    "switch": matches!(a.get_action(), ArgAction::SetTrue),
+                    "page": !FILE_MAKING.contains(&name.as_str()),
+                })
+            })
+            .collect()
     }
 
     /// Every setting's name, in the definition's order.

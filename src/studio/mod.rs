@@ -43,7 +43,12 @@ pub fn options() -> Value {
         .into_iter()
         .map(|(k, m)| json!({"id": k, "description": m.description}))
         .collect();
-    json!({"machines": machines, "materials": materials,
+    use crate::ops::settings::{CutSettings, Given, ReliefSettings};
+    let settings = json!({
+        "relief": Given::<ReliefSettings>::describe(),
+        "cut": Given::<CutSettings>::describe(),
+    });
+    json!({"machines": machines, "materials": materials, "settings": settings,
            "max_upload": MAX_UPLOAD, "max_resolution": work::MAX_RESOLUTION})
 }
 

@@ -353,6 +353,13 @@ impl Studio {
         write(&relief_path, &png)?;
         write(&file::sidecar_path(&relief_path), &json)?;
         let nc = dir.join("job.nc");
+        if c.split || c.tile.is_some() {
+            return Err(Fail::Bad(Error(
+                "--split and --tile make several job files; the studio makes one (use the \
+                 command line shown)"
+                    .into(),
+            )));
+        }
         let mut tp = c.settings.clone().job(
             nc.clone(),
             "relief.png".into(),

@@ -98,11 +98,59 @@ function reliefSettings() {
     const g = parseFloat(el.value);
     if (g !== 1) s.emphasize.push([el.dataset.name, g]);
   }
+  return more('relief', s);
+}
+
+/// The settings of the More section that are set, added to `s`.
+function more(kind, s) {
+  for (const el of document.querySelectorAll(`[data-more=${kind}]`)) {
+    if (el.type === 'checkbox') { if (el.checked) s[el.dataset.name] = true; }
+    else if (el.value.trim() !== '') s[el.dataset.name] = el.value.trim();
+  }
   return s;
 }
 
+/// A control for every setting the server describes that the page has
+/// none of: a checkbox for a switch, a list for a few values, else text
+/// with the default as its placeholder; labelled with the flag.
+function buildMore() {
+  const kinds = [['relief', reliefSettings, () => reliefChanged()], ['cut', cutSettings, () => askJobSoon()]];
+  for (const [kind, curated, changed] of kinds) {
+    const shown = new Set(Object.keys(curated()));
+    for (const el of document.querySelectorAll(kind === 'relief' ? '[data-k]' : '[data-c]')) {
+      shown.add(kind === 'relief' ? el.dataset.k : el.dataset.c);
+    }
+    const box = $('more-' + kind);
+    for (const d of S.options.settings[kind]) {
+      if (shown.has(d.name) || !d.page) continue;
+      const label = document.createElement('label');
+      label.title = d.help;
+      const name = document.createElement('code');
+      name.textContent = d.flag;
+      let el;
+      if (d.switch) {
+        el = document.createElement('input');
+        el.type = 'checkbox';
+      } else if (d.values.length) {
+        el = document.createElement('select');
+        el.append(new Option(d.default ? `${d.default} (default)` : 'default', ''));
+        for (const v of d.values) if (v !== d.default) el.append(new Option(v, v));
+      } else {
+        el = document.createElement('input');
+        el.type = 'text';
+        el.placeholder = d.default || '';
+      }
+      el.dataset.more = kind;
+      el.dataset.name = d.name;
+      el.addEventListener(d.switch || d.values.length ? 'change' : 'input', changed);
+      label.append(name, el);
+      box.append(label);
+    }
+  }
+}
+
 function cutSettings() {
-  return {
+  return more('cut', {
     machine: $('machine').value,
     tool: $('tool').value,
     finish: $('finish').value,
@@ -112,7 +160,7 @@ function cutSettings() {
     rest: $('rest').value || null,
     arcs: $('arcs').checked,
     origin: $('origin').value,
-  };
+  });
 }
 
 // ---- one request at a time, the newest settings next -----------------
@@ -798,6 +846,7 @@ async function start() {
     for (const m of S.options.machines) $('machine').append(new Option(m.name, m.id));
     for (const m of S.options.materials) $('material').append(new Option(`${m.id} (${m.description})`, m.id));
     fillTools();
+    buildMore();
     await model(await call('/api/model'));
   } catch (e) {
     status(e.message, true);
