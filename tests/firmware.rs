@@ -214,3 +214,43 @@ fn send_streams_a_job_to_the_firmware() {
     drop(grbl);
     std::fs::remove_dir_all(d).unwrap();
 }
+
+/// Every error and alarm code GRBL 1.1h documents (its own `doc/csv`) is
+/// told with its meaning, never as unknown.
+#[test]
+fn every_grbl_error_and_alarm_code_is_told_with_its_meaning() {
+    let Some(fw) = firmware("every_grbl_error_and_alarm_code_is_told_with_its_meaning") else {
+        return;
+    };
+    let Some(csv) = fw.csv.as_ref().filter(|c| c.is_dir()) else {
+        eprintln!("skipped the code check: GRBL's doc/csv is not beside the built firmware");
+        return;
+    };
+    let codes = |file: &str| -> Vec<u32> {
+        std::fs::read_to_string(csv.join(file))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .filter_map(|l| l.split(',').next()?.trim_matches('"').parse().ok())
+            .collect()
+    };
+    let errors = codes("error_codes_en_US.csv");
+    let alarms = codes("alarm_codes_en_US.csv");
+    assert!(
+        errors.len() >= 30 && alarms.len() >= 9,
+        "{errors:?} {alarms:?}"
+    );
+    for e in &errors {
+        let m = relievo::grbl::error_meaning(*e);
+        assert!(!m.starts_with("unknown"), "error:{e} has no meaning");
+    }
+    for a in &alarms {
+        let m = relievo::grbl::alarm_meaning(*a);
+        assert!(!m.starts_with("unknown"), "ALARM:{a} has no meaning");
+    }
+    eprintln!(
+        "GRBL 1.1h documents {} error and {} alarm codes; each is told with its meaning",
+        errors.len(),
+        alarms.len()
+    );
+}

@@ -14,6 +14,9 @@ use std::sync::OnceLock;
 pub struct Firmware {
     pub sim: PathBuf,
     pub validate: PathBuf,
+    /// GRBL's `doc/csv` (error, alarm and setting codes), when its sources
+    /// were built here.
+    pub csv: Option<PathBuf>,
 }
 
 fn find() -> Result<Firmware, String> {
@@ -21,7 +24,11 @@ fn find() -> Result<Firmware, String> {
         let sim = PathBuf::from(p);
         let validate = sim.with_file_name("gvalidate.exe");
         return if sim.is_file() && validate.is_file() {
-            Ok(Firmware { sim, validate })
+            Ok(Firmware {
+                sim,
+                validate,
+                csv: None,
+            })
         } else {
             Err(format!(
                 "RELIEVO_GRBL_SIM={}: no grbl_sim.exe with gvalidate.exe beside it",
@@ -41,6 +48,7 @@ fn find() -> Result<Firmware, String> {
     let fw = Firmware {
         sim: dest.join("grbl-sim/grbl_sim.exe"),
         validate: dest.join("grbl-sim/gvalidate.exe"),
+        csv: Some(dest.join("src/doc/csv")),
     };
     if fw.sim.is_file() && fw.validate.is_file() {
         return Ok(fw);
