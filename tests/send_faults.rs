@@ -376,6 +376,14 @@ fn status_leaves_a_held_board_held_and_check_only_runs_nothing() {
     assert_eq!(std::fs::read_to_string(&log).unwrap_or_default(), "");
     let out = run(&["send", job, "--port", &dev, "-q", "--hold-limit", "1"]);
     assert!(!out.status.success());
+    // connecting again to the held machine: no soft reset, refused, held
+    let again = run(&["send", job, "--port", &dev, "-q"]);
+    assert!(!again.status.success());
+    let e = String::from_utf8_lossy(&again.stderr);
+    assert!(
+        e.contains("GRBL is in Hold") && e.contains("left as it is"),
+        "{e}"
+    );
     for _ in 0..2 {
         let st = run(&["machine", "status", "--port", &dev]);
         ok(&st);

@@ -53,6 +53,9 @@ pub enum MachineAction {
     Zero,
     /// A Z touch-off on the plate (--plate): work Z0 on the stock under it.
     Probe,
+    /// 0x18 soft reset: stops everything at once (a machine in motion
+    /// loses its position: ALARM:3), then waits for GRBL's welcome.
+    Reset,
 }
 
 pub fn run(args: MachineArgs) -> relievo::Result<()> {
@@ -80,6 +83,11 @@ pub fn run(args: MachineArgs) -> relievo::Result<()> {
                 relievo::bail!("{}: no status report within 2.5 s of '?'", args.port);
             }
             got
+        }
+        MachineAction::Reset => {
+            r.port.write_all(&[relievo::grbl::SOFT_RESET])?;
+            r.handshake(2.5)?;
+            r.command("$G", 5.0)?
         }
         action => {
             r.handshake(2.5)?;
@@ -118,7 +126,7 @@ pub fn run(args: MachineArgs) -> relievo::Result<()> {
                     relievo::grbl::sender::touch_off(&mut r, &plate, None)?;
                     r.command("$#", 5.0)?
                 }
-                MachineAction::Status => Vec::new(),
+                MachineAction::Status | MachineAction::Reset => Vec::new(),
             }
         }
     };

@@ -26,9 +26,14 @@ pub struct SerialLink {
 }
 
 impl SerialLink {
+    /// Open `path` without raising DTR where the platform allows: a board
+    /// that resets on DTR (an Arduino Uno's bootloader) is then left running
+    /// (on Linux the kernel still raises DTR for a moment as the port
+    /// opens, so an Uno resets anyway; see the README's troubleshooting).
     pub fn open(path: &str, baud: u32) -> Result<SerialLink> {
         let port = serialport::new(path, baud)
             .timeout(Duration::from_millis(50))
+            .dtr_on_open(false)
             .open()
             .map_err(|e| crate::Error(format!("--port {path}: {e}")))?;
         Ok(SerialLink {

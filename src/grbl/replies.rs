@@ -3,7 +3,7 @@
 
 use super::port::Port;
 use super::state::State;
-use super::{SOFT_RESET, STATUS};
+use super::STATUS;
 use crate::bail;
 use crate::error::Result;
 use std::collections::VecDeque;
@@ -52,26 +52,31 @@ impl<'a> Replies<'a> {
         }
     }
 
-    /// Wait for the welcome; soft-reset once if it does not come.
+    /// Wait for the welcome (a board that resets when the port opens
+    /// prints it once booted); without one, a status report says a GRBL is
+    /// there, taken as it stands. Never a soft reset: 0x18 stops a running
+    /// or held machine and is the user's to send (`relievo machine reset`).
     pub fn handshake(&mut self, timeout: f64) -> Result<()> {
-        for attempt in 0..2 {
-            if attempt == 1 {
-                self.port.write_all(&[SOFT_RESET])?;
-            }
-            let until = self.port.now() + timeout;
-            while self.port.now() < until {
-                if let Some(l) = self.next(until - self.port.now())? {
-                    if l.starts_with("Grbl ") {
-                        // and whatever follows it at once ([MSG:..]), for
-                        // half a second at most: a chatty device never ends
-                        let t = self.port.now() + 0.5;
-                        while self.port.now() < t && self.next(0.05)?.is_some() {}
-                        return Ok(());
-                    }
+        let until = self.port.now() + timeout;
+        while self.port.now() < until {
+            if let Some(l) = self.next(until - self.port.now())? {
+                if l.starts_with("Grbl ") {
+                    // and whatever follows it at once ([MSG:..]), for half
+                    // a second at most: a chatty device never ends
+                    let t = self.port.now() + 0.5;
+                    while self.port.now() < t && self.next(0.05)?.is_some() {}
+                    return Ok(());
                 }
             }
         }
-        bail!("no GRBL welcome within {timeout} s, not even after a soft reset")
+        if self.status()?.is_some() {
+            return Ok(());
+        }
+        bail!(
+            "no GRBL welcome within {timeout} s, nor a status report: is a GRBL controller on \
+             this port, at this baud? (relievo never resets it on its own; `relievo machine \
+             reset` does)"
+        )
     }
 
     /// A status report (None if none comes within a second).

@@ -76,6 +76,17 @@ impl SendJob {
                  or the link is bad; nothing was sent"
             );
         };
+        if matches!(
+            st.state,
+            State::Hold(_) | State::Door(_) | State::Run | State::Jog | State::Home
+        ) {
+            bail!(
+                "GRBL is in {} (a job, a hold or an open door): left as it is, nothing was \
+                 sent; finish or resume it on the machine (or `relievo machine reset` to stop \
+                 it), then send again",
+                st.state
+            );
+        }
         if st.state == State::Alarm {
             bail!(
                 "GRBL is in alarm (position may be lost after a reset in motion): check the \
