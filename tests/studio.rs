@@ -202,7 +202,8 @@ fn bad_uploads_and_requests_leave_the_studio_serving() {
     let mut s = std::net::TcpStream::connect(&host).unwrap();
     write!(
         s,
-        "POST /api/model?name=huge.stl HTTP/1.1\r\nHost: {host}\r\nContent-Length: 200000000\r\n\r\nsolid"
+        "POST /api/model?name=huge.stl HTTP/1.1\r\nHost: {host}\r\nX-Relievo-Secret: {}\r\nContent-Length: 200000000\r\n\r\nsolid",
+        secret_of(&studio.url)
     )
     .unwrap();
     let mut head = [0u8; 64];
@@ -212,9 +213,11 @@ fn bad_uploads_and_requests_leave_the_studio_serving() {
     drop(s);
     // malformed requests: a clear error each
     let http = agent();
+    let secret = secret_of(&studio.url);
     let api = |path: &str, body: &str| {
         let mut r = http
             .post(format!("{}{path}", studio.url))
+            .header("X-Relievo-Secret", &secret)
             .content_type("application/json")
             .send(body)
             .unwrap();
@@ -296,20 +299,29 @@ fn another_site_cannot_use_the_studio() {
         .trim_end_matches('/')
         .to_string();
     let port = authority.rsplit_once(':').unwrap().1.to_string();
-    let ask = |method: &str, path: &str, host: &str, origin: Option<&str>| -> (u16, String) {
+    let secret = secret_of(&studio.url);
+    let ask_as = |method: &str,
+                  path: &str,
+                  host: &str,
+                  origin: Option<&str>,
+                  key: &str|
+     -> (u16, String) {
         let mut s = std::net::TcpStream::connect(&authority).unwrap();
         let origin = origin
             .map(|o| format!("Origin: {o}\r\n"))
             .unwrap_or_default();
         write!(
             s,
-            "{method} {path} HTTP/1.1\r\nHost: {host}\r\n{origin}Content-Length: 0\r\nConnection: close\r\n\r\n"
+            "{method} {path} HTTP/1.1\r\nHost: {host}\r\n{origin}X-Relievo-Secret: {key}\r\nContent-Length: 0\r\nConnection: close\r\n\r\n"
         )
         .unwrap();
         let mut text = String::new();
         s.read_to_string(&mut text).unwrap();
         let code = text.split_whitespace().nth(1).unwrap().parse().unwrap();
         (code, text)
+    };
+    let ask = |method: &str, path: &str, host: &str, origin: Option<&str>| {
+        ask_as(method, path, host, origin, &secret)
     };
     let ours = format!("127.0.0.1:{port}");
     assert_eq!(ask("GET", "/api/options", &ours, None).0, 200);
@@ -326,6 +338,29 @@ fn another_site_cannot_use_the_studio() {
     assert!(text.contains("a page from 'http://evil.example'"), "{text}");
     let page = format!("http://127.0.0.1:{port}");
     assert_eq!(ask("POST", "/api/demo", &ours, Some(&page)).0, 200);
+    // without the secret the page holds, or with another, nothing changes
+    for key in ["", "0123456789abcdef0123456789abcdef"] {
+        let (code, text) = ask_as("POST", "/api/demo", &ours, Some(&page), key);
+        assert_eq!(code, 403, "{text}");
+        assert!(text.contains("lacks this studio's secret"), "{text}");
+    }
+}
+
+/// The secret the studio's page holds (a page from another site cannot
+/// read it: the browser keeps another origin's response from it).
+fn secret_of(url: &str) -> String {
+    let page = agent()
+        .get(url)
+        .call()
+        .unwrap()
+        .body_mut()
+        .read_to_string()
+        .unwrap();
+    let at = page
+        .find("name=\"relievo-secret\" content=\"")
+        .expect("the page holds a secret")
+        + 31;
+    page[at..at + 32].to_string()
 }
 
 /// The page holds every setting of the command line's relief and cutting

@@ -145,6 +145,9 @@ fn names_us(authority: &str, at: SocketAddr) -> bool {
 }
 
 /// Refuse a request for another host, or from another site's page.
+/// The header a request that changes anything carries the secret in.
+pub const SECRET_HEADER: &str = "X-Relievo-Secret";
+
 fn trusted(rq: &Request, at: SocketAddr) -> Result<(), Reply> {
     let host = header_of(rq, "Host").unwrap_or("");
     if !names_us(host, at) {
@@ -267,9 +270,23 @@ fn failed(f: Fail) -> Reply {
 fn route(rq: &mut Request, studio: &Studio) -> Reply {
     let url = rq.url().to_string();
     let path = url.split('?').next().unwrap_or("");
+    if *rq.method() == Method::Post && header_of(rq, SECRET_HEADER) != Some(studio.secret.as_str())
+    {
+        return Reply::error(
+            403,
+            "refused: the request lacks this studio's secret (its own page sends it)",
+        );
+    }
     match (rq.method(), path) {
         (Method::Get, "/") | (Method::Get, "/index.html") => {
-            Reply::file_inline("text/html; charset=utf-8", page::INDEX)
+            let meta = format!(
+                "<head>\n<meta name=\"relievo-secret\" content=\"{}\">",
+                studio.secret
+            );
+            Reply::file_inline(
+                "text/html; charset=utf-8",
+                &page::INDEX.replacen("<head>", &meta, 1),
+            )
         }
         (Method::Get, "/studio.js") => Reply::file_inline("text/javascript", page::SCRIPT),
         (Method::Get, "/studio.css") => Reply::file_inline("text/css", page::STYLE),

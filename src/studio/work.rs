@@ -90,6 +90,9 @@ type Shaped = (Field, Vec<String>);
 pub struct Studio {
     /// Scratch folder: uploads, the job's files.
     pub dir: PathBuf,
+    /// What every request that changes anything must carry: the page
+    /// this studio serves holds it, a page from elsewhere cannot read it.
+    pub secret: String,
     model: Mutex<Arc<Model>>,
     seen: Mutex<Option<Seen>>,
     relief: Mutex<Option<Arc<Made>>>,
@@ -123,6 +126,23 @@ fn sight_key(s: &ReliefSettings) -> crate::ops::settings::ReliefSettings {
     }
 }
 
+/// 128 unpredictable bits as hex: hashes keyed by the process's random
+/// hasher keys (drawn from the operating system) over the clock.
+fn new_secret() -> String {
+    use std::hash::{BuildHasher, Hasher};
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    (0..2u64)
+        .map(|k| {
+            let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+            h.write_u64(k);
+            h.write_u128(now);
+            format!("{:016x}", h.finish())
+        })
+        .collect()
+}
+
 /// Largest relief the studio makes (pixels on the long side).
 pub const MAX_RESOLUTION: usize = 4096;
 
@@ -135,6 +155,7 @@ impl Studio {
         std::fs::create_dir_all(&dir).map_err(|e| Error(format!("{}: {e}", dir.display())))?;
         let s = Studio {
             dir,
+            secret: new_secret(),
             model: Mutex::new(Arc::new(Model {
                 name: None,
                 path: None,

@@ -24,11 +24,12 @@ fn find() -> Result<Firmware, String> {
         let sim = PathBuf::from(p);
         let validate = sim.with_file_name("gvalidate.exe");
         return if sim.is_file() && validate.is_file() {
-            Ok(Firmware {
-                sim,
-                validate,
-                csv: None,
-            })
+            // built by build.sh DEST: DEST/grbl-sim/grbl_sim.exe, DEST/src
+            let csv = sim
+                .parent()
+                .and_then(Path::parent)
+                .map(|d| d.join("src/doc/csv"));
+            Ok(Firmware { sim, validate, csv })
         } else {
             Err(format!(
                 "RELIEVO_GRBL_SIM={}: no grbl_sim.exe with gvalidate.exe beside it",
