@@ -612,7 +612,7 @@ fn a_frozen_controller_is_not_waited_on_for_ever() {
         ..Default::default()
     });
     let e = SendJob {
-        hold_limit: Some(60.0),
+        stall_timeout: Some(60.0),
         ..job(&path)
     }
     .run(&mut p, &AtomicBool::new(false))
@@ -622,12 +622,13 @@ fn a_frozen_controller_is_not_waited_on_for_ever() {
             && e.0.contains("spindle was stopped"),
         "{e}"
     );
+    assert!(e.0.contains("waiting on job line"), "{e}");
     // a 90 s dwell within a 60 s limit runs to the end
     let dwell = d.join("dwell.nc");
     std::fs::write(&dwell, "G21 G90\nG1 X1 F500\nG4 P90\nG1 X2\nG1 X3\n").unwrap();
     let mut p = port(Faults::default());
     SendJob {
-        hold_limit: Some(60.0),
+        stall_timeout: Some(60.0),
         ..job(&dwell)
     }
     .run(&mut p, &AtomicBool::new(false))

@@ -41,12 +41,16 @@ pub struct SendArgs {
     /// Seconds without an answer from GRBL that mean the link is dead.
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub link_timeout: f64,
-    /// Seconds the machine may stay in feed hold (or with its door open),
-    /// or stand still acknowledging nothing (beyond a dwell's own time),
-    /// before `send` stops the spindle and gives up; a stall is told after
-    /// 30 s.
+    /// Seconds the machine may stay in feed hold (or with its door open)
+    /// before `send` stops the spindle and gives up.
     #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
     pub hold_limit: f64,
+    /// Seconds a controller that answers status polls but neither moves
+    /// nor acknowledges a line (beyond a dwell's own time) is waited on
+    /// before `send` holds, stops the spindle and gives up (told after
+    /// 30 s).
+    #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
+    pub stall_timeout: f64,
     /// At an M0 (a tool change): ask on the terminal, continue at once,
     /// or touch off Z on the touch plate (--plate) and continue.
     #[arg(long, value_enum, default_value = "ask")]
@@ -79,6 +83,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         rx_buffer: 128,
         link_timeout: Some(args.link_timeout),
         hold_limit: Some(args.hold_limit),
+        stall_timeout: Some(args.stall_timeout),
         on_pause: args.on_pause,
         plate: args.plate,
         keys: !quiet,
@@ -89,6 +94,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
     for (flag, v) in [
         ("--link-timeout", args.link_timeout),
         ("--hold-limit", args.hold_limit),
+        ("--stall-timeout", args.stall_timeout),
     ] {
         if !(v.is_finite() && (0.1..=86400.0).contains(&v)) {
             relievo::bail!("{flag} {v}: give seconds from 0.1 to 86400");

@@ -48,13 +48,17 @@ pub struct Options {
     /// Seconds without an answer (`ok`, `error`, alarm or status report)
     /// that mean the link is dead.
     pub link_timeout: f64,
-    /// Seconds the machine may stay in Hold (or Door), or stand still
-    /// acknowledging nothing, before the sender gives up, stops the spindle
-    /// and says so.
+    /// Seconds the machine may stay in Hold (or Door) before the sender
+    /// gives up, stops the spindle and says so.
     pub hold_limit: f64,
     /// Seconds of standing still with nothing acknowledged (beyond a
     /// dwell's own time) before the sender says so.
     pub stall_warning: f64,
+    /// Seconds of standing still with nothing acknowledged (beyond a
+    /// dwell's own time) before the sender holds, stops the spindle and
+    /// gives up: a moving machine's position changes at every status
+    /// report, so stillness without an answer is a stalled controller.
+    pub stall_timeout: f64,
     /// GRBL's planner blocks (from a status report's `Bf:` when idle).
     pub planner: usize,
     /// When each line should end by the time estimate (for the ETA).
@@ -79,6 +83,7 @@ impl Default for Options {
             link_timeout: 10.0,
             hold_limit: 600.0,
             stall_warning: 30.0,
+            stall_timeout: 60.0,
             planner: super::sim::PLANNER_BLOCKS,
             min_move: MIN_MOVE,
             clock: None,

@@ -466,7 +466,7 @@ impl<'a> Stream<'a> {
                 )
             });
         }
-        if stalled && still > self.opts.hold_limit {
+        if stalled && still > self.opts.stall_timeout {
             r.port.write_all(&[FEED_HOLD])?;
             spindle_stop_once_held(r)?;
             self.out.stop = Some(Stop::Stalled {

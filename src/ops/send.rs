@@ -34,6 +34,8 @@ pub struct SendJob {
     pub link_timeout: Option<f64>,
     /// Seconds the machine may stay in Hold (default 600).
     pub hold_limit: Option<f64>,
+    /// Seconds a stalled controller is waited on (default 60).
+    pub stall_timeout: Option<f64>,
     /// What to do at an M0.
     pub on_pause: sender::OnPause,
     /// The touch plate, for `OnPause::Probe`.
@@ -63,6 +65,7 @@ impl SendJob {
             progress: self.progress,
             link_timeout: self.link_timeout.unwrap_or(defaults.link_timeout),
             hold_limit: self.hold_limit.unwrap_or(defaults.hold_limit),
+            stall_timeout: self.stall_timeout.unwrap_or(defaults.stall_timeout),
             on_pause: self.on_pause,
             plate: self.plate,
             keys: self.keys,
