@@ -162,10 +162,17 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
             }
         } else {
             let out = sim.take_output();
-            if !out.is_empty() {
-                master
-                    .write_all(&out)
-                    .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+            match master.write_all(&out) {
+                Ok(()) => {}
+                // the host closed the port between the read and this
+                // write: what was said goes unheard, as above
+                Err(e)
+                    if e.raw_os_error() == Some(libc::EIO)
+                        || e.kind() == std::io::ErrorKind::BrokenPipe =>
+                {
+                    open = false;
+                }
+                Err(e) => relievo::bail!("grbl-sim: {e}"),
             }
         }
         if let Some(f) = log.as_mut() {
