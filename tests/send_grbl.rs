@@ -599,6 +599,38 @@ fn check_mode_runs_through_a_tool_change() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// A machine left in check mode (by a check cut short, here or by another
+/// program) would only check the job a carver sent to be cut: the sender
+/// leaves check mode first, and the job runs.
+#[test]
+fn a_machine_left_in_check_mode_cuts_the_job() {
+    use relievo::grbl::port::Port;
+    let d = scratch("send-left-checking");
+    let (path, lines) = write_spiral(&d, 50, 0.1);
+    for check_only in [false, true] {
+        let mut p = port(Faults::default());
+        p.write_all(b"$C\n").unwrap();
+        let mut r = sender::Replies::new(&mut p);
+        assert_eq!(
+            r.status().unwrap().map(|s| s.state),
+            Some(relievo::grbl::state::State::Check)
+        );
+        SendJob {
+            check_only,
+            ..job(&path)
+        }
+        .run(&mut p, &AtomicBool::new(false))
+        .unwrap();
+        finish(&mut p);
+        if check_only {
+            assert!(p.sim.log.is_empty(), "moved: {:?}", &p.sim.log[..3]);
+        } else {
+            assert_eq!(p.sim.log.last(), lines.last(), "the job ran to its end");
+        }
+    }
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// A controller that goes on answering status polls but neither moves nor
 /// acknowledges is not waited on for ever: past the limit the sender stops
 /// (feed hold, spindle off) and says where it waited. A long dwell is not

@@ -230,10 +230,15 @@ pub fn min_move(settings: &[String]) -> Option<f64> {
 }
 
 /// Validate the whole job in check mode: `$C`, stream everything, `$C`
-/// again (GRBL resets leaving it). Returns every error.
+/// again (GRBL resets leaving it). Returns every error. A check that
+/// fails on the way (a lost link, a reset) still tries to leave check
+/// mode, so the next send does not find GRBL checking instead of cutting.
 pub fn check(r: &mut Replies, lines: &[JobLine], opts: &Options) -> Result<Vec<Stop>> {
     let reply = r.command("$C", 5.0)?;
-    if reply.last().is_none_or(|l| l != "ok") {
+    if !reply.iter().any(|l| l == "[MSG:Enabled]") || reply.last().is_none_or(|l| l != "ok") {
+        if reply.iter().any(|l| l == "[MSG:Disabled]") {
+            r.handshake(opts.welcome_timeout)?;
+        }
         bail!("GRBL did not enter check mode: {}", reply.join(" "));
     }
     let quiet = Options {
@@ -241,8 +246,22 @@ pub fn check(r: &mut Replies, lines: &[JobLine], opts: &Options) -> Result<Vec<S
         journal: None,
         ..opts.clone()
     };
-    let o = stream(r, lines, &[], &quiet, true, &AtomicBool::new(false))?;
-    r.command("$C", 5.0)?;
-    r.handshake(opts.welcome_timeout)?;
+    let streamed = stream(r, lines, &[], &quiet, true, &AtomicBool::new(false));
+    let left = leave_check_mode(r, opts.welcome_timeout);
+    let o = streamed?;
+    if let Some(stop) = o.stop.filter(|s| !matches!(s, Stop::Error { .. })) {
+        bail!("the check stopped: {}", stop.describe());
+    }
+    left?;
     Ok(o.errors)
+}
+
+/// `$C` on a machine in check mode: GRBL says `[MSG:Disabled]`, answers
+/// ok and resets (its welcome follows).
+pub fn leave_check_mode(r: &mut Replies, welcome_timeout: f64) -> Result<()> {
+    let reply = r.command("$C", 5.0)?;
+    if !reply.iter().any(|l| l == "[MSG:Disabled]") {
+        bail!("GRBL did not leave check mode: {}", reply.join(" "));
+    }
+    r.handshake(welcome_timeout)
 }

@@ -73,12 +73,14 @@ impl SendJob {
         };
         let mut r = Replies::new(port);
         r.handshake(opts.welcome_timeout)?;
-        let Some(st) = r.status()? else {
-            bail!(
-                "no status report within 1 s after the welcome: not a GRBL 1.1 controller, \
-                 or the link is bad; nothing was sent"
-            );
-        };
+        let mut st = machine_state(&mut r)?;
+        if st.state == State::Check {
+            // left so by a check that was cut short: nothing moves in check
+            // mode, and leaving it (GRBL resets) loses nothing a job needs
+            eprintln!("GRBL was in check mode ($C): leaving it first");
+            sender::leave_check_mode(&mut r, opts.welcome_timeout)?;
+            st = machine_state(&mut r)?;
+        }
         if matches!(
             st.state,
             State::Hold(_) | State::Door(_) | State::Run | State::Jog | State::Home
@@ -176,5 +178,16 @@ impl SendJob {
                 lines.last().map_or(0, |l| l.number)
             ),
         }
+    }
+}
+
+/// The machine's state as its status report gives it.
+fn machine_state(r: &mut Replies) -> Result<sender::Status> {
+    match r.status()? {
+        Some(st) => Ok(st),
+        None => bail!(
+            "no status report within 1 s after the welcome: not a GRBL 1.1 controller, or \
+             the link is bad; nothing was sent"
+        ),
     }
 }
