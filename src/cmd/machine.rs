@@ -59,7 +59,7 @@ pub enum MachineAction {
 }
 
 pub fn run(args: MachineArgs) -> relievo::Result<()> {
-    use relievo::grbl::{port::SerialLink, sender::Replies};
+    use relievo::grbl::{port::SerialLink, sender::Replies, session};
     let mut port = SerialLink::open(&args.port, args.baud)?;
     let mut r = Replies::new(&mut port);
     let lines = match args.action {
@@ -96,26 +96,14 @@ pub fn run(args: MachineArgs) -> relievo::Result<()> {
                 MachineAction::Home => r.command("$H", 120.0)?,
                 MachineAction::Settings => r.command("$$", 5.0)?,
                 MachineAction::Jog => {
-                    let n = relievo::gcode::emit::num;
-                    let words: String = [('X', args.x), ('Y', args.y), ('Z', args.z)]
-                        .iter()
-                        .filter_map(|(c, v)| v.map(|v| format!("{c}{}", n(v))))
-                        .collect();
-                    if words.is_empty() {
-                        relievo::bail!("machine jog: give --x, --y and/or --z (mm)");
-                    }
-                    if !(args.feed.is_finite() && args.feed > 0.0) {
-                        relievo::bail!("--feed {}: must be positive, mm/min", args.feed);
-                    }
-                    r.command(&format!("$J=G91G21{words}F{}", n(args.feed)), 5.0)?
+                    let line = session::jog_line([args.x, args.y, args.z], args.feed)
+                        .map_err(|e| relievo::Error(format!("machine {e}")))?;
+                    r.command(&line, 5.0)?
                 }
                 MachineAction::Zero => {
-                    let axes: String = args.axes.to_ascii_uppercase();
-                    if axes.is_empty() || !axes.chars().all(|c| "XYZ".contains(c)) {
-                        relievo::bail!("--axes {}: some of x, y, z", args.axes);
-                    }
-                    let words: String = axes.chars().map(|c| format!("{c}0")).collect();
-                    r.command(&format!("G10L20P0{words}"), 5.0)?
+                    let line = session::zero_line(&args.axes)
+                        .map_err(|e| relievo::Error(format!("--axes: {e}")))?;
+                    r.command(&line, 5.0)?
                 }
                 MachineAction::Probe => {
                     let Some(plate) = args.plate else {

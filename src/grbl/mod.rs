@@ -7,6 +7,7 @@ pub mod port;
 mod replies;
 pub mod resume;
 pub mod sender;
+pub mod session;
 pub mod sim;
 pub mod state;
 mod stream;

@@ -3,6 +3,7 @@
 //! every computation is the library's (`work`), reached over a small API
 //! (`server`).
 
+pub mod machine;
 pub mod packet;
 pub mod server;
 pub mod settings;
@@ -21,6 +22,7 @@ pub const MAX_UPLOAD: usize = 128 << 20;
 pub mod page {
     pub const INDEX: &str = include_str!("page/index.html");
     pub const SCRIPT: &str = include_str!("page/studio.js");
+    pub const MACHINE: &str = include_str!("page/machine.js");
     pub const STYLE: &str = include_str!("page/studio.css");
 }
 

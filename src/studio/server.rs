@@ -8,7 +8,7 @@
 use super::packet::{extreme, mean, shrink, Packet};
 use super::settings::{CutSettings, ReliefSettings};
 use super::work::{Fail, Studio};
-use super::{page, MAX_UPLOAD};
+use super::{machine, page, MAX_UPLOAD};
 use serde_json::{json, Value};
 use std::io::Read;
 use std::net::{IpAddr, SocketAddr};
@@ -34,7 +34,7 @@ pub struct Reply {
 }
 
 impl Reply {
-    fn json(status: u16, v: Value) -> Reply {
+    pub(super) fn json(status: u16, v: Value) -> Reply {
         Reply {
             status,
             kind: "application/json",
@@ -42,7 +42,7 @@ impl Reply {
             attachment: None,
         }
     }
-    fn error(status: u16, msg: impl Into<String>) -> Reply {
+    pub(super) fn error(status: u16, msg: impl Into<String>) -> Reply {
         Reply::json(status, json!({ "error": msg.into() }))
     }
     fn binary(body: Vec<u8>) -> Reply {
@@ -175,6 +175,9 @@ fn header(k: &str, v: &str) -> Header {
 }
 
 fn handle(mut rq: Request, studio: &Studio) {
+    if rq.url().split('?').next() == Some("/api/machine/live") {
+        return live(rq, studio);
+    }
     let reply = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| route(&mut rq, studio)))
         .unwrap_or_else(|_| Reply::error(500, "internal error (the studio goes on serving)"));
     send(rq, reply);
@@ -277,6 +280,12 @@ fn route(rq: &mut Request, studio: &Studio) -> Reply {
             "refused: the request lacks this studio's secret (its own page sends it)",
         );
     }
+    if path.starts_with("/api/machine/") && !has_secret(rq, &url, studio) {
+        return Reply::error(
+            403,
+            "refused: the request lacks this studio's secret (its own page sends it)",
+        );
+    }
     match (rq.method(), path) {
         (Method::Get, "/") | (Method::Get, "/index.html") => {
             let meta = format!(
@@ -290,6 +299,19 @@ fn route(rq: &mut Request, studio: &Studio) -> Reply {
         }
         (Method::Get, "/studio.js") => Reply::file_inline("text/javascript", page::SCRIPT),
         (Method::Get, "/studio.css") => Reply::file_inline("text/css", page::STYLE),
+        (Method::Get, "/machine.js") => Reply::file_inline("text/javascript", page::MACHINE),
+        (Method::Get, "/api/machine/ports") => machine::ports(),
+        (Method::Get, "/api/machine/state") => machine::state(studio),
+        (Method::Post, p) if p.starts_with("/api/machine/") => {
+            let call = body(rq, MAX_JSON).and_then(|b| {
+                serde_json::from_slice::<machine::Call>(&b)
+                    .map_err(|e| Reply::error(400, format!("bad machine call: {e}")))
+            });
+            match call {
+                Ok(c) => machine::post(studio, &p["/api/machine/".len()..], c),
+                Err(r) => r,
+            }
+        }
         (Method::Get, "/api/options") => Reply::json(200, super::options()),
         (Method::Get, "/api/model") => Reply::json(200, model_info(studio)),
         (Method::Get, "/api/mesh") => mesh(studio),
@@ -330,6 +352,32 @@ fn route(rq: &mut Request, studio: &Studio) -> Reply {
         (Method::Get, _) | (Method::Post, _) => Reply::error(404, format!("no such page: {path}")),
         (m, _) => Reply::error(405, format!("{m} is not served")),
     }
+}
+
+/// The secret in the request's header, or (for a WebSocket, which a page
+/// cannot give headers) its `secret` query parameter.
+fn has_secret(rq: &Request, url: &str, studio: &Studio) -> bool {
+    header_of(rq, SECRET_HEADER) == Some(studio.secret.as_str())
+        || query(url, "secret").as_deref() == Some(studio.secret.as_str())
+}
+
+/// The Machine panel's live readout: a WebSocket (RFC 6455 handshake
+/// here, frames by tungstenite) for this studio's own page only.
+fn live(rq: Request, studio: &Studio) {
+    let url = rq.url().to_string();
+    if !has_secret(&rq, &url, studio) {
+        return send(
+            rq,
+            Reply::error(403, "refused: the request lacks this studio's secret"),
+        );
+    }
+    let Some(key) = header_of(&rq, "Sec-WebSocket-Key").map(str::to_string) else {
+        return send(rq, Reply::error(400, "a WebSocket, please"));
+    };
+    let accept = tungstenite::handshake::derive_accept_key(key.as_bytes());
+    let resp = Response::empty(101).with_header(header("Sec-WebSocket-Accept", &accept));
+    let ws = rq.upgrade("websocket", resp);
+    machine::live(ws, studio);
 }
 
 fn model_info(studio: &Studio) -> Value {

@@ -101,6 +101,8 @@ pub struct Studio {
     versions: AtomicU64,
     uploads: AtomicU64,
     work: Mutex<()>,
+    /// The Machine panel's connection to a controller.
+    pub machine: super::machine::Slot,
 }
 
 /// A lock that a panicked holder left usable (its data is replaced whole).
@@ -169,6 +171,7 @@ impl Studio {
             versions: AtomicU64::new(0),
             uploads: AtomicU64::new(0),
             work: Mutex::new(()),
+            machine: Default::default(),
         };
         s.open(model.map(|p| (p.to_path_buf(), p.display().to_string())))?;
         Ok(s)

@@ -781,6 +781,9 @@ function pointer() {
 function tab(t) {
   S.tab = t;
   for (const b of document.querySelectorAll('#tabs button')) b.classList.toggle('on', b.dataset.tab === t);
+  // the Machine panel takes the stage's place
+  $('machine-panel').hidden = t !== 'machine';
+  $('stage').hidden = $('summary').hidden = t === 'machine';
   draw();
   if (t === 'job') askJob();
 }

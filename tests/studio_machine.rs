@@ -1,0 +1,259 @@
+//! The studio's Machine panel in a real browser against the simulated
+//! GRBL on a pseudo-terminal (`relievo grbl-sim`), judged on screenshots:
+//! connect, the live readout, jog, zero, a refused line told with GRBL's
+//! meaning, hold and cycle start. And the panel's calls refused, with the
+//! port seeing not one byte, without the page's secret or from another
+//! site.
+
+mod common;
+
+use common::browser::{Browser, Studio};
+use common::scratch;
+use std::io::{Read, Write};
+use std::path::Path;
+use std::process::Child;
+
+/// `relievo grbl-sim` at `link`; killed when dropped.
+struct GrblSim(Child);
+
+impl GrblSim {
+    fn start(link: &Path, speed: &str) -> GrblSim {
+        let child = common::bin()
+            .args(["grbl-sim", "--speed", speed, "--link"])
+            .arg(link)
+            .stdout(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        for _ in 0..100 {
+            if link.exists() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+        assert!(link.exists(), "grbl-sim made no {}", link.display());
+        GrblSim(child)
+    }
+}
+
+impl Drop for GrblSim {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// The mean colour of an image's middle third.
+fn middle(img: &image::RgbaImage) -> [f64; 3] {
+    let (w, h) = img.dimensions();
+    let mut sum = [0.0; 3];
+    let mut n = 0.0;
+    for y in h / 3..2 * h / 3 {
+        for x in w / 3..2 * w / 3 {
+            let p = img.get_pixel(x, y);
+            for k in 0..3 {
+                sum[k] += p[k] as f64;
+            }
+            n += 1.0;
+        }
+    }
+    sum.map(|s| s / n)
+}
+
+fn wait_text(b: &Browser, css: &str, what: &str, f: impl Fn(&str) -> bool) -> String {
+    b.wait(what, 30, || {
+        let t = b.text(css);
+        f(&t).then_some(t)
+    })
+}
+
+#[test]
+fn a_carver_drives_the_machine_from_the_page() {
+    let d = scratch("studio-machine");
+    let Some(b) = Browser::start(&d) else {
+        return;
+    };
+    let link = d.join("grbl");
+    let _grbl = GrblSim::start(&link, "5");
+    let studio = Studio::start(&[]);
+    b.goto(&studio.url);
+    b.click("#machine-tab");
+    b.script("document.getElementById('m-port').value = ''");
+    b.keys("#m-port", link.to_str().unwrap());
+    b.click("#m-conn");
+    wait_text(&b, "#m-state", "the machine Idle", |t| t == "Idle");
+    let idle = b.shot("#m-state");
+    let [r, g, _] = middle(&idle);
+    assert!(g > r + 40.0, "the Idle badge is green: {:?}", middle(&idle));
+
+    // a 10 mm step along X, then its work zero
+    b.script("document.getElementById('m-step').value = '10'");
+    b.click("[data-jog='x+']");
+    wait_text(&b, "#m-wx", "work X at 10", |t| t == "10.000");
+    assert_eq!(b.text("#m-mx"), "10.000");
+    b.click("[data-zero='x']");
+    wait_text(&b, "#m-wx", "work X zeroed", |t| t == "0.000");
+    assert_eq!(b.text("#m-mx"), "10.000", "machine X stays");
+
+    // a line GRBL refuses, told with its meaning, in red
+    b.keys("#m-line", "G1 X1 Q7\n");
+    let said = wait_text(&b, "#m-console", "the refusal", |t| t.contains("error:20"));
+    assert!(
+        said.contains("unsupported or invalid G-code command"),
+        "{said}"
+    );
+    let red = b.shot("#m-console .got.error");
+    assert!(
+        red.pixels().any(|p| p[0] > 200 && p[1] < 170 && p[2] < 170),
+        "the refusal is drawn in red"
+    );
+
+    // a long move held and started again: the badge turns amber in Hold
+    b.keys("#m-line", "G1 X60 F600\n");
+    wait_text(&b, "#m-state", "Run", |t| t == "Run");
+    b.click("[data-rt='hold']");
+    wait_text(&b, "#m-state", "Hold", |t| t.starts_with("Hold"));
+    let held = middle(&b.shot("#m-state"));
+    assert!(
+        held[0] > held[2] + 60.0 && held[1] > held[2] + 30.0,
+        "the Hold badge is amber: {held:?}"
+    );
+    let x_held = b.text("#m-wx");
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    assert_eq!(b.text("#m-wx"), x_held, "held means standing");
+    b.click("[data-rt='start']");
+    wait_text(&b, "#m-wx", "the move's end", |t| t == "60.000");
+    wait_text(&b, "#m-state", "Idle again", |t| t == "Idle");
+    let panel = b.shot("#machine-panel");
+    panel.save(d.join("machine-panel.png")).unwrap();
+    eprintln!(
+        "the Machine panel: {}",
+        d.join("machine-panel.png").display()
+    );
+    b.click("#m-conn");
+    wait_text(&b, "#m-state", "disconnected", |t| t == "not connected");
+}
+
+/// A pseudo-terminal this test holds the other end of, to see every byte
+/// a studio writes to it.
+struct Pty {
+    master: std::fs::File,
+    path: String,
+}
+
+impl Pty {
+    fn open() -> Pty {
+        use std::os::fd::FromRawFd;
+        // SAFETY: posix_openpt/grantpt/unlockpt/ptsname on the fd just
+        // opened; ptsname's buffer is copied at once
+        unsafe {
+            let fd = libc::posix_openpt(libc::O_RDWR | libc::O_NOCTTY | libc::O_NONBLOCK);
+            assert!(fd >= 0, "posix_openpt");
+            assert_eq!(libc::grantpt(fd), 0);
+            assert_eq!(libc::unlockpt(fd), 0);
+            let name = std::ffi::CStr::from_ptr(libc::ptsname(fd))
+                .to_string_lossy()
+                .into_owned();
+            Pty {
+                master: std::fs::File::from_raw_fd(fd),
+                path: name,
+            }
+        }
+    }
+
+    /// Bytes that arrived from the studio since the last call.
+    fn arrived(&mut self) -> Vec<u8> {
+        let mut got = Vec::new();
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = self.master.read(&mut buf) {
+            if n == 0 {
+                break;
+            }
+            got.extend_from_slice(&buf[..n]);
+        }
+        got
+    }
+}
+
+#[test]
+fn another_site_cannot_drive_the_machine() {
+    let mut pty = Pty::open();
+    let studio = Studio::start(&[]);
+    let authority = studio.url.trim_start_matches("http://").to_string();
+    let port = authority.rsplit_once(':').unwrap().1.to_string();
+    let page = common::browser::agent()
+        .get(&studio.url)
+        .call()
+        .unwrap()
+        .body_mut()
+        .read_to_string()
+        .unwrap();
+    let at = page.find("name=\"relievo-secret\" content=\"").unwrap() + 31;
+    let secret = page[at..at + 32].to_string();
+    let ask = |path: &str, host: &str, origin: Option<&str>, key: &str, body: &str| {
+        let mut s = std::net::TcpStream::connect(&authority).unwrap();
+        let origin = origin
+            .map(|o| format!("Origin: {o}\r\n"))
+            .unwrap_or_default();
+        let key = if key.is_empty() {
+            String::new()
+        } else {
+            format!("X-Relievo-Secret: {key}\r\n")
+        };
+        write!(
+            s,
+            "POST {path} HTTP/1.1\r\nHost: {host}\r\n{origin}{key}Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
+            body.len()
+        )
+        .unwrap();
+        let mut text = String::new();
+        s.read_to_string(&mut text).unwrap();
+        let code: u16 = text.split_whitespace().nth(1).unwrap().parse().unwrap();
+        (code, text)
+    };
+    let ours = format!("127.0.0.1:{port}");
+    let connect = format!("{{\"port\":\"{}\"}}", pty.path);
+    let evil = Some("http://evil.example");
+    let rebound = format!("rebind.example:{port}");
+    for (path, body) in [
+        ("/api/machine/connect", connect.as_str()),
+        ("/api/machine/line", "{\"line\":\"G0 Z5\"}"),
+        ("/api/machine/realtime", "{\"name\":\"reset\"}"),
+        ("/api/machine/jog", "{\"x\":10}"),
+    ] {
+        for (host, origin, key) in [
+            (ours.as_str(), None, ""),
+            (ours.as_str(), None, "0123456789abcdef0123456789abcdef"),
+            (ours.as_str(), evil, secret.as_str()),
+            (rebound.as_str(), None, secret.as_str()),
+        ] {
+            let (code, text) = ask(path, host, origin, key, body);
+            assert_eq!(code, 403, "{path} {host} {origin:?} {key}: {text}");
+        }
+    }
+    // a WebSocket without the secret is refused too
+    let (code, _) = {
+        let mut s = std::net::TcpStream::connect(&authority).unwrap();
+        write!(
+            s,
+            "GET /api/machine/live HTTP/1.1\r\nHost: {ours}\r\nUpgrade: websocket\r\nConnection: Upgrade\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n"
+        )
+        .unwrap();
+        let mut buf = [0u8; 512];
+        let n = s.read(&mut buf).unwrap();
+        let text = String::from_utf8_lossy(&buf[..n]).to_string();
+        let code: u16 = text.split_whitespace().nth(1).unwrap().parse().unwrap();
+        (code, text)
+    };
+    assert_eq!(code, 403);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    assert_eq!(pty.arrived(), b"", "the port saw bytes");
+    // the page itself connects: the port hears status polls, nothing else
+    let (code, text) = ask("/api/machine/connect", &ours, None, &secret, &connect);
+    assert_eq!(code, 200, "{text}");
+    std::thread::sleep(std::time::Duration::from_millis(700));
+    let heard = pty.arrived();
+    assert!(
+        !heard.is_empty() && heard.iter().all(|&b| b == b'?'),
+        "connecting sends only '?': {heard:?}"
+    );
+}
