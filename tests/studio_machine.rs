@@ -18,9 +18,14 @@ struct GrblSim(Child);
 
 impl GrblSim {
     fn start(link: &Path, speed: &str) -> GrblSim {
+        GrblSim::with(link, speed, &[])
+    }
+
+    fn with(link: &Path, speed: &str, more: &[&str]) -> GrblSim {
         let child = common::bin()
             .args(["grbl-sim", "--speed", speed, "--link"])
             .arg(link)
+            .args(more)
             .stdout(std::process::Stdio::null())
             .spawn()
             .unwrap();
@@ -131,6 +136,134 @@ fn a_carver_drives_the_machine_from_the_page() {
     );
     b.click("#m-conn");
     wait_text(&b, "#m-state", "disconnected", |t| t == "not connected");
+}
+
+/// The studio's own job run from the page with `relievo send`'s sender:
+/// checked in GRBL's check mode, then run through its tool change (the
+/// page says which tool to fit and goes on when told) to its last line,
+/// which the machine executes; then run again, stopped midway (hold,
+/// spindle off, reset), and resumed from the journal's safe point.
+#[test]
+fn the_page_runs_the_job_through_its_tool_change() {
+    let d = scratch("studio-machine-job");
+    let Some(b) = Browser::start(&d) else {
+        return;
+    };
+    let link = d.join("grbl");
+    let log = d.join("ran.log");
+    let _grbl = GrblSim::with(&link, "400", &["--log", log.to_str().unwrap()]);
+    let studio = Studio::start(&[]);
+    b.goto(&studio.url);
+    b.script(
+        "const w = document.getElementById('width'); w.value = '30'; \
+         w.dispatchEvent(new Event('change', {bubbles: true})); \
+         const r = document.getElementById('resolution'); r.value = '256'; \
+         r.dispatchEvent(new Event('change', {bubbles: true}));",
+    );
+    b.click("#tabs button[data-tab=job]");
+    let summary = b.wait("the job", 240, || {
+        let s = b.text("#summary");
+        s.contains("lines").then_some(s)
+    });
+    eprintln!("the job: {summary}");
+    b.click("#machine-tab");
+    b.script("document.getElementById('m-port').value = ''");
+    b.keys("#m-port", link.to_str().unwrap());
+    b.click("#m-conn");
+    wait_text(&b, "#m-state", "the machine Idle", |t| t == "Idle");
+
+    b.click("#m-check");
+    let said = b.wait("the check", 120, || {
+        let t = b.text("#m-jobtext");
+        t.contains("check passed").then_some(t)
+    });
+    eprintln!("{said}");
+    assert!(!log.exists() || std::fs::read_to_string(&log).unwrap().is_empty());
+
+    b.click("#m-run");
+    let pause = b.wait("the tool change", 120, || {
+        let t = b.text("#m-pausetext");
+        t.contains("M0").then_some(t)
+    });
+    assert!(pause.contains("ball:3.175"), "which tool to fit: {pause}");
+    let amber = middle(&b.shot("#m-pause"));
+    assert!(
+        amber[0] > amber[2] + 40.0,
+        "the pause is shown amber: {amber:?}"
+    );
+    assert!(wait_text(&b, "#m-state", "held at the M0", |t| t.starts_with("Hold")).len() > 3);
+    b.click("#m-continue");
+    let done = b.wait("the job's end", 240, || {
+        let t = b.text("#m-jobtext");
+        (t.starts_with("done") || t.contains("stopped") || t.contains("error")).then_some(t)
+    });
+    assert!(done.starts_with("done"), "{done}");
+    let bar = b.shot("#m-progress");
+    let (w, h) = bar.dimensions();
+    let p = bar.get_pixel(w - 3, h / 2);
+    assert!(p[2] > p[0] + 40, "the bar is full: {p:?}");
+    // every line the sender counted, the machine executed
+    let n: usize = done
+        .trim_start_matches("done: ")
+        .split(' ')
+        .next()
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{done}"));
+    let ran = std::fs::read_to_string(&log).unwrap().lines().count();
+    eprintln!("{done}; the machine ran {ran} lines");
+    assert_eq!(ran, n);
+    let job = std::fs::read_to_string(studio_job(&b)).unwrap();
+    assert!(
+        job.lines().count() >= n,
+        "the job the page ran is the studio's"
+    );
+    b.shot("#machine-panel")
+        .save(d.join("job-done.png"))
+        .unwrap();
+
+    // stopped midway, then resumed from the journal's safe point
+    b.click("#m-run");
+    b.wait("some progress", 60, || {
+        let t = b.text("#m-jobtext");
+        t.split(": ")
+            .nth(1)
+            .and_then(|x| x.split(' ').next())
+            .and_then(|n| n.parse::<usize>().ok())
+            .filter(|&n| n > 500)
+    });
+    b.click("#m-stop");
+    let stopped = b.wait("the stop", 60, || {
+        let t = b.text("#m-jobtext");
+        t.contains("stopped").then_some(t)
+    });
+    assert!(stopped.contains("resume"), "{stopped}");
+    b.wait("the resume offer", 10, || {
+        b.script("return !document.getElementById('m-resume').hidden")
+            .as_bool()
+            .filter(|v| *v)
+    });
+    b.click("#m-unlock");
+    wait_text(&b, "#m-state", "unlocked", |t| t == "Idle");
+    b.click("#m-resume");
+    let pause = b.wait("the resumed job's tool change or end", 240, || {
+        let t = b.text("#m-jobtext");
+        let p = b.text("#m-pausetext");
+        (t.starts_with("done") || t.contains("stopped") || p.contains("M0")).then_some((t, p))
+    });
+    if pause.1.contains("M0") {
+        b.click("#m-continue");
+    }
+    let done = b.wait("the resumed job's end", 240, || {
+        let t = b.text("#m-jobtext");
+        (t.starts_with("done") || t.contains("stopped") || t.contains("error")).then_some(t)
+    });
+    assert!(done.starts_with("done"), "{done}");
+}
+
+/// The job the studio made, as the page downloads it.
+fn studio_job(b: &Browser) -> std::path::PathBuf {
+    b.click("#dl-nc");
+    b.downloaded("job.nc")
 }
 
 /// A pseudo-terminal this test holds the other end of, to see every byte

@@ -87,6 +87,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         on_pause: args.on_pause,
         plate: args.plate,
         keys: !quiet,
+        remote: None,
     };
     if args.on_pause == relievo::grbl::sender::OnPause::Probe && args.plate.is_none() {
         relievo::bail!("--on-pause probe: give the touch plate with --plate THICKNESS[@X,Y]");

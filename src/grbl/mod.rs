@@ -4,6 +4,7 @@
 
 mod lines;
 pub mod port;
+pub mod remote;
 mod replies;
 pub mod resume;
 pub mod sender;

@@ -69,6 +69,9 @@ pub struct Options {
     /// The shortest move sure to take a planner block: a step of the
     /// coarsest axis ($100-$102), since GRBL drops a move of no steps.
     pub min_move: f64,
+    /// Someone away from the terminal (the studio's page) watching and
+    /// steering the job.
+    pub remote: Option<super::remote::Remote>,
 }
 
 impl Default for Options {
@@ -90,6 +93,7 @@ impl Default for Options {
             on_pause: OnPause::Ask,
             plate: None,
             keys: false,
+            remote: None,
         }
     }
 }

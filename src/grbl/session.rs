@@ -7,6 +7,7 @@
 //! panel is a view of it; connecting sends nothing but `?`.
 
 use super::port::Port;
+use super::remote::{Remote, Told};
 use super::replies::Replies;
 use super::state::State;
 use super::{alarm_meaning, error_meaning, STATUS};
@@ -133,6 +134,28 @@ pub struct Said {
     pub meaning: Option<&'static str>,
 }
 
+/// A job the session streams (by the front end's sender, on this port).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct JobRun {
+    pub name: String,
+    /// Check mode: parsed by GRBL, nothing moves.
+    pub check: bool,
+    pub running: bool,
+    pub acked: usize,
+    pub total: usize,
+    pub elapsed: f64,
+    /// Seconds left by the job's time estimate, scaled by how the machine
+    /// keeps to it.
+    pub left: Option<f64>,
+    /// Held at a pause: the line and what it asks (which tool to fit).
+    pub paused: Option<String>,
+    /// How it ended: done, or why not (with the resume point).
+    pub outcome: Option<String>,
+    pub ok: Option<bool>,
+    /// The journal offers a safe point to resume from.
+    pub resumable: bool,
+}
+
 /// What the machine last said about itself.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct Readout {
@@ -164,6 +187,7 @@ pub struct Readout {
     pub silent: bool,
     /// Operator lines sent and not yet answered, or waiting to be sent.
     pub pending: usize,
+    pub job: Option<JobRun>,
     pub console: VecDeque<Said>,
 }
 
@@ -202,6 +226,28 @@ impl Readout {
         while self.console.len() > CONSOLE_KEEP {
             self.console.pop_front();
         }
+    }
+
+    /// A line GRBL said during a job: status into the readout, answers
+    /// other than `ok` into the console. Whether the page needs telling.
+    fn heard_in_job(&mut self, l: &str) -> bool {
+        if l.starts_with('<') {
+            let before = self.glance();
+            self.status(l);
+            return before != self.glance();
+        }
+        if l == "ok" {
+            return false;
+        }
+        let code = |p: &str| l.strip_prefix(p).and_then(|c| c.parse::<u32>().ok());
+        let meaning = code("error:")
+            .map(error_meaning)
+            .or(code("ALARM:").map(alarm_meaning));
+        if let Some(c) = code("ALARM:") {
+            self.alarm = Some((c, alarm_meaning(c)));
+        }
+        self.say("got", l, meaning);
+        true
     }
 
     /// Take a status report's fields (a report leaves out what it has
@@ -263,14 +309,17 @@ impl Readout {
 }
 
 /// What the operator asks of the session.
-#[derive(Debug)]
 pub enum Ask {
     /// A line (G-code or `$` command), sent when the one before is
     /// answered.
     Line(String),
-    Realtime(Realtime),
+    /// Lend the port to a job's sender; the session waits meanwhile.
+    Lend(Lent),
     Close,
 }
+
+/// Work done with the session's port, on its thread.
+pub type Lent = Box<dyn FnOnce(&mut dyn Port) + Send>;
 
 /// The readout, shared between the session's thread and its watchers.
 pub struct Shared {
@@ -312,6 +361,8 @@ impl Shared {
 pub struct Session {
     asks: Sender<Ask>,
     pub shared: Arc<Shared>,
+    /// A job's channel to the page: realtime bytes, stop, go on.
+    remote: Remote,
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
@@ -327,11 +378,12 @@ impl Session {
             }),
             changed: Condvar::new(),
         });
+        let remote = job_remote(shared.clone());
         let (asks, rx) = channel();
-        let s = shared.clone();
+        let (s, rm) = (shared.clone(), remote.clone());
         let thread = std::thread::spawn(move || {
             let mut port = port;
-            let end = Link::new(&s).run(&mut *port, &rx);
+            let end = Link::new(&s, rm).run(&mut *port, &rx);
             s.update(|r| {
                 r.connected = false;
                 r.pending = 0;
@@ -346,6 +398,7 @@ impl Session {
         Session {
             asks,
             shared,
+            remote,
             thread: Some(thread),
         }
     }
@@ -362,6 +415,9 @@ impl Session {
         if !r.connected {
             return Err("not connected".into());
         }
+        if r.job.as_ref().is_some_and(|j| j.running) {
+            return Err("a job is running: hold or stop it first".into());
+        }
         if r.pending >= MAX_QUEUED {
             return Err(format!("{} lines already wait for GRBL", r.pending));
         }
@@ -371,11 +427,115 @@ impl Session {
             .map_err(|_| "not connected".to_string())
     }
 
+    /// A realtime byte, at once (during a job too: hold, start,
+    /// overrides).
     pub fn realtime(&self, rt: Realtime) -> std::result::Result<(), String> {
+        if !self.shared.now().connected {
+            return Err("not connected".into());
+        }
+        self.remote.push(rt.byte());
+        self.shared
+            .update(|s| s.say("sent", &format!("{rt:?} (0x{:02x})", rt.byte()), None));
+        Ok(())
+    }
+
+    /// Run `work` with the port on the session's thread: a job's sender,
+    /// told by and steered through `remote()`. `job` is what the page
+    /// shows of it until `work` ends it with `end_job`.
+    pub fn lend(&self, job: JobRun, work: Lent) -> std::result::Result<(), String> {
+        let r = self.shared.now();
+        if !r.connected {
+            return Err("not connected".into());
+        }
+        if r.job.as_ref().is_some_and(|j| j.running) {
+            return Err("a job is running already".into());
+        }
+        self.remote
+            .stop
+            .store(false, std::sync::atomic::Ordering::SeqCst);
+        self.remote.take_go_on();
+        self.remote.take_bytes();
+        self.shared.update(|s| {
+            s.say("note", &format!("job {} started", job.name), None);
+            s.job = Some(JobRun {
+                running: true,
+                ..job
+            });
+        });
         self.asks
-            .send(Ask::Realtime(rt))
+            .send(Ask::Lend(work))
             .map_err(|_| "not connected".to_string())
     }
+
+    /// The channel a lent job's sender takes.
+    pub fn remote(&self) -> Remote {
+        self.remote.clone()
+    }
+
+    /// Stop the running job (feed hold, spindle off; the sender's stop).
+    pub fn stop(&self) {
+        self.remote
+            .stop
+            .store(true, std::sync::atomic::Ordering::SeqCst);
+    }
+
+    /// Go on from the pause the job waits at.
+    pub fn go_on(&self) {
+        self.remote.go_on();
+    }
+}
+
+impl Shared {
+    /// The lent job ended: how, and whether its journal can resume it.
+    pub fn end_job(&self, outcome: String, ok: bool, resumable: bool) {
+        self.update(|s| {
+            s.say("note", &outcome, None);
+            if let Some(j) = s.job.as_mut() {
+                j.running = false;
+                j.paused = None;
+                j.outcome = Some(outcome);
+                j.ok = Some(ok);
+                j.resumable = resumable;
+            }
+        });
+    }
+}
+
+/// The remote a job's sender tells: status into the readout, answers
+/// into the console, progress at most five times a second.
+fn job_remote(shared: Arc<Shared>) -> Remote {
+    let last = Mutex::new(f64::MIN);
+    Remote::new(move |t| match t {
+        Told::Heard(l) => {
+            let mut g = shared.lock();
+            if g.heard_in_job(l) {
+                g.seq += 1;
+                shared.changed.notify_all();
+            }
+        }
+        Told::Progress {
+            acked,
+            total,
+            elapsed,
+            left,
+        } => {
+            let mut at = last.lock().unwrap_or_else(|e| e.into_inner());
+            // (a new job's clock starts below the last one's)
+            if !(0.0..1.0 / POLL_HZ).contains(&(elapsed - *at)) || acked == total {
+                *at = elapsed;
+                shared.update(|s| {
+                    if let Some(j) = s.job.as_mut() {
+                        (j.acked, j.total, j.elapsed, j.left) = (acked, total, elapsed, left);
+                    }
+                });
+            }
+        }
+        Told::Paused(p) => shared.update(|s| {
+            if let Some(j) = s.job.as_mut() {
+                j.paused = p;
+            }
+        }),
+    })
 }
 
 impl Drop for Session {
@@ -390,6 +550,7 @@ impl Drop for Session {
 /// The session thread's own state.
 struct Link<'a> {
     shared: &'a Shared,
+    remote: Remote,
     queue: VecDeque<String>,
     /// The operator line GRBL has and has not answered.
     awaiting: Option<String>,
@@ -398,9 +559,10 @@ struct Link<'a> {
 }
 
 impl<'a> Link<'a> {
-    fn new(shared: &'a Shared) -> Link<'a> {
+    fn new(shared: &'a Shared, remote: Remote) -> Link<'a> {
         Link {
             shared,
+            remote,
             queue: VecDeque::new(),
             awaiting: None,
             last_poll: f64::MIN,
@@ -416,13 +578,15 @@ impl<'a> Link<'a> {
                 match ask {
                     Ask::Close => return Ok(()),
                     Ask::Line(l) => self.queue.push_back(l),
-                    Ask::Realtime(rt) => {
-                        r.port.write_all(&[rt.byte()])?;
-                        self.shared.update(|s| {
-                            s.say("sent", &format!("{rt:?} (0x{:02x})", rt.byte()), None)
-                        });
+                    Ask::Lend(work) => {
+                        work(&mut *r.port);
+                        self.last_heard = r.port.now();
                     }
                 }
+            }
+            let bytes = self.remote.take_bytes();
+            if !bytes.is_empty() {
+                r.port.write_all(&bytes)?;
             }
             if self.awaiting.is_none() {
                 if let Some(l) = self.queue.pop_front() {

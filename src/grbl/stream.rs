@@ -7,6 +7,7 @@
 //! journal records each line sent, acknowledged and executed.
 
 use super::lines::JobLine;
+use super::remote::{Remote, Told};
 use super::replies::{parse_status, Replies, Status};
 use super::resume::{Journal, Tracker};
 use super::sender::{OnPause, Options, Outcome, Stop};
@@ -195,7 +196,12 @@ impl<'a> Stream<'a> {
             poll: 1.0 / opts.poll_hz.clamp(0.1, 5.0),
             journal,
             tracker: Tracker::new(opts.planner, opts.min_move),
-            progress: Progress::new(opts.progress, lines.len(), opts.clock.clone()),
+            progress: Progress::new(
+                opts.progress,
+                lines.len(),
+                opts.clock.clone(),
+                opts.remote.clone(),
+            ),
             keys: Keys::new(opts.keys && !check_mode),
             holding: false,
         })
@@ -218,7 +224,9 @@ impl<'a> Stream<'a> {
     /// The loop: the operator, sending, the clocks, then GRBL's next line.
     fn run(&mut self, r: &mut Replies, cancel: &AtomicBool) -> Result<()> {
         loop {
-            if cancel.load(Ordering::Relaxed) && !self.stopping() {
+            let remote = self.opts.remote.as_ref();
+            let stop = remote.is_some_and(|rm| rm.stop.load(Ordering::Relaxed));
+            if (cancel.load(Ordering::Relaxed) || stop) && !self.stopping() {
                 r.port.write_all(&[FEED_HOLD])?;
                 spindle_stop_once_held(r)?;
                 self.out.stop = Some(Stop::Cancelled);
@@ -226,6 +234,9 @@ impl<'a> Stream<'a> {
             }
             if let Some(k) = self.keys.key() {
                 self.on_key(r, k)?;
+            }
+            if let Some(bytes) = remote.map(|rm| rm.take_bytes()).filter(|b| !b.is_empty()) {
+                r.port.write_all(&bytes)?;
             }
             self.send(r)?;
             if self.inflight.is_empty() && (self.next == self.items.len() || self.stopping()) {
@@ -238,6 +249,9 @@ impl<'a> Stream<'a> {
             let Some(l) = r.next(self.poll / 2.0)? else {
                 continue;
             };
+            if let Some(rm) = &self.opts.remote {
+                rm.tell(Told::Heard(&l));
+            }
             let flow = match Event::of(&l) {
                 Event::Ok => self.on_answer(r, None)?,
                 Event::Error(code) => self.on_answer(r, Some(code))?,
@@ -416,8 +430,12 @@ impl<'a> Stream<'a> {
             let k = self.items[item].job.unwrap_or(0);
             let (line, on) = (&self.lines[k], self.opts.on_pause);
             let progress = &self.progress;
-            self.keys
-                .cooked(|| progress.suspend(|| resume_pause(r, line, on)))?;
+            match &self.opts.remote {
+                Some(rm) if on != OnPause::Continue => wait_for_page(r, rm, line, self.poll)?,
+                _ => self
+                    .keys
+                    .cooked(|| progress.suspend(|| resume_pause(r, line, on)))?,
+            }
             self.phase = Phase::AtPause {
                 item,
                 released: true,
@@ -584,7 +602,36 @@ fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
     } else {
         eprintln!("{what}: continuing (--on-pause continue)");
     }
-    r.port.write_all(&[super::CYCLE_START])
+    r.port.write_all(&[CYCLE_START])
+}
+
+/// Held at a pause for the page: tell it, keep the readout live and pass
+/// its realtime bytes, until it says go on (cycle start) or stop.
+fn wait_for_page(r: &mut Replies, rm: &Remote, line: &JobLine, poll: f64) -> Result<()> {
+    let mut what = format!("paused at job line {} '{}'", line.number, line.original);
+    if !line.note.is_empty() {
+        what.push_str(&format!(" ({})", line.note));
+    }
+    rm.tell(Told::Paused(Some(what)));
+    let mut last_poll = f64::MIN;
+    while !rm.take_go_on() {
+        if rm.stop.load(Ordering::Relaxed) {
+            return Ok(());
+        }
+        let bytes = rm.take_bytes();
+        if !bytes.is_empty() {
+            r.port.write_all(&bytes)?;
+        }
+        if r.port.now() - last_poll >= poll {
+            r.port.write_all(&[STATUS])?;
+            last_poll = r.port.now();
+        }
+        if let Some(l) = r.next(0.05)? {
+            rm.tell(Told::Heard(&l));
+        }
+    }
+    rm.tell(Told::Paused(None));
+    r.port.write_all(&[CYCLE_START])
 }
 
 /// GRBL's feed override bytes: +10%, -10%, 100%.
@@ -679,10 +726,11 @@ struct Progress {
     start: std::time::Instant,
     last_log: std::time::Instant,
     pos: Option<[f64; 3]>,
+    remote: Option<Remote>,
 }
 
 impl Progress {
-    fn new(on: bool, total: usize, clock: Option<Vec<f64>>) -> Progress {
+    fn new(on: bool, total: usize, clock: Option<Vec<f64>>, remote: Option<Remote>) -> Progress {
         use std::io::IsTerminal;
         let tty = std::io::stderr().is_terminal();
         let bar = (on && tty).then(|| {
@@ -698,6 +746,7 @@ impl Progress {
             start: std::time::Instant::now(),
             last_log: std::time::Instant::now(),
             pos: None,
+            remote,
         }
     }
 
@@ -714,6 +763,14 @@ impl Progress {
     fn set(&mut self, done: usize, pos: Option<[f64; 3]>) {
         if pos.is_some() {
             self.pos = pos;
+        }
+        if let Some(rm) = &self.remote {
+            rm.tell(Told::Progress {
+                acked: done,
+                total: self.total,
+                elapsed: self.start.elapsed().as_secs_f64(),
+                left: self.eta(done),
+            });
         }
         let eta = self.eta(done).map_or("--:--".into(), |s| {
             let s = s.round() as u64;

@@ -42,6 +42,9 @@ pub struct SendJob {
     pub plate: Option<sender::TouchOff>,
     /// Keys on the terminal while streaming (hold/resume, feed override).
     pub keys: bool,
+    /// Watched and steered from elsewhere (the studio's page) instead of
+    /// the terminal.
+    pub remote: Option<crate::grbl::remote::Remote>,
 }
 
 impl SendJob {
@@ -69,6 +72,7 @@ impl SendJob {
             on_pause: self.on_pause,
             plate: self.plate,
             keys: self.keys,
+            remote: self.remote.clone(),
             ..defaults
         };
         let mut r = Replies::new(port);
@@ -108,7 +112,7 @@ impl SendJob {
             if let Some(m) = sender::min_move(&settings) {
                 opts.min_move = m;
             }
-            if self.progress {
+            if self.progress || self.remote.is_some() {
                 let text = crate::input::read_text(&self.job, crate::input::MAX_FILE)?;
                 opts.clock = sender::clock(&lines, &text, &settings).map(|c| {
                     let base = if start > 0 { c[start - 1] } else { 0.0 };

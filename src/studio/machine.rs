@@ -7,8 +7,10 @@
 use super::server::Reply;
 use super::work::Studio;
 use crate::grbl::port::SerialLink;
-use crate::grbl::session::{self, Realtime, Session};
+use crate::grbl::session::{self, JobRun, Realtime, Session};
+use crate::ops::send::SendJob;
 use serde_json::{json, Value};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// The studio's one machine connection.
@@ -42,6 +44,10 @@ pub struct Call {
     thickness: Option<f64>,
     /// frame: safe Z, mm above work zero.
     safe_z: Option<f64>,
+    /// run: in GRBL's check mode only (nothing moves).
+    check: bool,
+    /// run: from the journal's safe resume point.
+    resume: bool,
 }
 
 /// The serial ports found on this machine.
@@ -91,6 +97,15 @@ pub fn post(studio: &Studio, what: &str, call: Call) -> Reply {
         "unlock" => s.line("$X"),
         "probe" => probe(&s, &call),
         "frame" => frame(studio, &s, &call),
+        "run" => run(studio, &s, &call),
+        "stop" => {
+            s.stop();
+            Ok(())
+        }
+        "continue" => {
+            s.go_on();
+            Ok(())
+        }
         _ => return Reply::error(404, format!("no such machine call: {what}")),
     };
     match done {
@@ -138,6 +153,60 @@ fn probe(s: &Session, call: &Call) -> Result<(), String> {
         s.line(&l)?;
     }
     Ok(())
+}
+
+/// Run (or check) the job the studio made with `relievo send`'s own
+/// sender and journal, watched and steered by the page. A stop is the
+/// sender's (feed hold, spindle off once held), then a soft reset, which
+/// GRBL needs to drop what it has buffered.
+fn run(studio: &Studio, s: &Session, call: &Call) -> Result<(), String> {
+    let Some(j) = studio.last_job() else {
+        return Err("run: make a job first (the Job tab)".into());
+    };
+    let job = SendJob {
+        job: j.dir.join("job.nc"),
+        check_only: call.check,
+        rx_buffer: 128,
+        remote: Some(s.remote()),
+        ..SendJob::default()
+    };
+    let journal = job.journal_path();
+    let job = SendJob {
+        resume: call.resume.then(|| journal.clone()),
+        ..job
+    };
+    let (shared, stop, check) = (s.shared.clone(), s.remote().stop, call.check);
+    let shown = JobRun {
+        name: if call.resume {
+            "job.nc (resumed)"
+        } else {
+            "job.nc"
+        }
+        .into(),
+        check,
+        ..JobRun::default()
+    };
+    s.lend(
+        shown,
+        Box::new(move |port| {
+            let ran = job.run(port, &AtomicBool::new(false));
+            if stop.load(Ordering::SeqCst) {
+                let _ = port.write_all(&[crate::grbl::SOFT_RESET]);
+            }
+            match ran {
+                Ok(_) if check => {
+                    let n = shared.now().job.map_or(0, |j| j.total);
+                    shared.end_job(format!("check passed: {n} lines"), true, false)
+                }
+                Ok((out, n)) => shared.end_job(
+                    format!("done: {n} lines in {:.0} s", out.seconds),
+                    true,
+                    false,
+                ),
+                Err(e) => shared.end_job(e.0, false, !check && journal.exists()),
+            }
+        }),
+    )
 }
 
 /// Trace the last job's XY bounds at safe Z, to see it fits the stock.

@@ -4,7 +4,7 @@
 // which owns the port; the page only shows and asks.
 'use strict';
 
-const M = { ws: null, connected: false, state: null };
+const M = { ws: null, connected: false, state: null, job: null };
 
 async function machineCall(what, body) {
   try {
@@ -66,6 +66,34 @@ function showReadout(r) {
   const bf = r.buffer ? ` · buffer ${r.buffer[0]} blocks ${r.buffer[1]} bytes free` : '';
   const fs = r.connected ? `feed ${r.feed ?? '–'} mm/min · spindle ${r.spindle ?? '–'} rpm${ov}${bf}` : '';
   $('m-fs').textContent = fs + (r.pending ? ` · ${r.pending} line(s) waiting` : '');
+  if (r.job !== undefined) M.job = r.job;
+  showJob(M.job);
+}
+
+function clock(s) {
+  if (s === undefined || s === null) return '–';
+  s = Math.round(s);
+  return `${Math.floor(s / 60)}:${String(s % 60).padStart(2, '0')}`;
+}
+
+function showJob(j) {
+  const running = !!(j && j.running);
+  $('m-run').disabled = $('m-check').disabled = running || !M.connected;
+  $('m-stop').disabled = !running;
+  if (!j) return;
+  const share = j.total ? j.acked / j.total : 0;
+  $('m-bar').style.width = (100 * share).toFixed(1) + '%';
+  const t = $('m-jobtext');
+  if (j.outcome) {
+    t.textContent = j.outcome;
+    t.className = j.ok ? 'good' : 'bad';
+  } else {
+    t.className = '';
+    t.textContent = `${j.check ? 'checking' : 'running'} ${j.name}: ${j.acked} of ${j.total || '…'} lines · ${clock(j.elapsed)} elapsed · ${clock(j.left)} left`;
+  }
+  $('m-pause').hidden = !j.paused;
+  $('m-pausetext').textContent = j.paused || '';
+  $('m-resume').hidden = !(j.resumable && !running);
 }
 
 function watch() {
@@ -120,6 +148,11 @@ function machineInit() {
   });
   $('m-probe-go').addEventListener('click', () => machineCall('probe', { thickness: parseFloat($('m-plate').value) || 0 }));
   $('m-frame').addEventListener('click', () => machineCall('frame', {}));
+  $('m-run').addEventListener('click', () => machineCall('run', {}));
+  $('m-check').addEventListener('click', () => machineCall('run', { check: true }));
+  $('m-resume').addEventListener('click', () => machineCall('run', { resume: true }));
+  $('m-stop').addEventListener('click', () => machineCall('stop'));
+  $('m-continue').addEventListener('click', () => machineCall('continue'));
   $('m-send').addEventListener('submit', (e) => {
     e.preventDefault();
     const l = $('m-line').value.trim();
