@@ -215,6 +215,115 @@ fn send_streams_a_job_to_the_firmware() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// The studio's Machine panel's connection on the firmware: it reads
+/// GRBL's own status reports (work offset, overrides, buffer), jogs and
+/// zeroes, tells a refusal's meaning, and lends its port to the sender
+/// for a job with a tool change, which pauses for the page and runs to
+/// its end when told to go on.
+#[test]
+fn the_machine_panel_s_session_drives_the_firmware() {
+    use relievo::grbl::port::SerialLink;
+    use relievo::grbl::session::{jog_line, zero_line, JobRun, Readout, Session};
+    use relievo::ops::send::SendJob;
+    let Some(fw) = firmware("the_machine_panel_s_session_drives_the_firmware") else {
+        return;
+    };
+    let d = scratch("fw-session");
+    let grbl = OnPty::start(fw, &d);
+    let tty = grbl.tty.to_str().unwrap().to_string();
+    let s = std::sync::Arc::new(Session::open(
+        Box::new(SerialLink::open(&tty, 115200).unwrap()),
+        &tty,
+    ));
+    let wait = |what: &str, secs: f64, f: &dyn Fn(&Readout) -> bool| -> Readout {
+        let t = std::time::Instant::now();
+        let mut r = s.shared.now();
+        while !f(&r) {
+            assert!(t.elapsed().as_secs_f64() < secs, "{what}: {r:?}");
+            r = s.shared.after(r.seq, 0.2);
+        }
+        r
+    };
+    let r = wait("Idle with its offsets", 10.0, &|r| {
+        r.state.as_deref() == Some("Idle") && r.wco.is_some() && r.overrides.is_some()
+    });
+    assert_eq!(r.overrides, Some([100, 100, 100]));
+    // (GRBL's default $10=1 leaves the buffer out of its reports)
+    s.line(&jog_line([Some(5.0), None, None], 1000.0).unwrap())
+        .unwrap();
+    wait("jogged 5 mm", 20.0, &|r| {
+        r.state.as_deref() == Some("Idle") && r.mpos.is_some_and(|p| (p[0] - 5.0).abs() < 1e-3)
+    });
+    s.line(&zero_line("x").unwrap()).unwrap();
+    let r = wait("work X zeroed", 10.0, &|r| {
+        r.wpos.is_some_and(|p| p[0].abs() < 1e-3)
+    });
+    assert!((r.mpos.unwrap()[0] - 5.0).abs() < 1e-3);
+    s.line("G1 X1 Q7").unwrap();
+    let r = wait("the refusal", 10.0, &|r| {
+        r.console.iter().any(|c| c.text == "error:20")
+    });
+    let e = r.console.iter().find(|c| c.text == "error:20").unwrap();
+    assert!(e.meaning.is_some_and(|m| m.contains("unsupported")));
+
+    // a short job with a tool change, lent the port like the page's Run
+    let job = d.join("change.nc");
+    std::fs::write(
+        &job,
+        "G21 G90 G94\nG0 Z2\nG1 X2 Y1 F600\nG0 Z5\nM5\nM0 (fit the 1 mm ball)\n\
+         G0 X1 Y1\nG1 Z0 F300\nG1 X3 F600\nG0 Z5\nM2\n",
+    )
+    .unwrap();
+    let run = SendJob {
+        job: job.clone(),
+        rx_buffer: 128,
+        remote: Some(s.remote()),
+        ..SendJob::default()
+    };
+    let shared = s.shared.clone();
+    s.lend(
+        JobRun::default(),
+        Box::new(move |port| {
+            let ran = run.run(port, &std::sync::atomic::AtomicBool::new(false));
+            match ran {
+                Ok((_, n)) => shared.end_job(format!("done: {n}"), true, false),
+                Err(e) => shared.end_job(e.0, false, false),
+            }
+        }),
+    )
+    .unwrap();
+    let r = wait("the pause", 30.0, &|r| {
+        r.job.as_ref().is_some_and(|j| j.paused.is_some())
+    });
+    let pause = r.job.unwrap().paused.unwrap();
+    assert!(pause.contains("fit the 1 mm ball"), "{pause}");
+    // stopped before the M0, the machine stands Idle: the carver jogs
+    // (and would probe) there, and going on puts it back where the job was
+    let r = wait("Idle at the change", 20.0, &|r| {
+        r.state.as_deref() == Some("Idle")
+    });
+    let z = r.wpos.unwrap()[2];
+    s.line(&jog_line([None, None, Some(-3.0)], 600.0).unwrap())
+        .unwrap();
+    wait("jogged down at the change", 20.0, &|r| {
+        r.state.as_deref() == Some("Idle")
+            && r.wpos.is_some_and(|p| (p[2] - (z - 3.0)).abs() < 1e-3)
+    });
+    s.go_on();
+    let r = wait("the job's end", 60.0, &|r| {
+        r.job.as_ref().is_some_and(|j| j.outcome.is_some())
+    });
+    let j = r.job.unwrap();
+    assert_eq!(j.outcome.as_deref(), Some("done: 11"), "{j:?}");
+    let r = wait("the end position", 20.0, &|r| {
+        r.state.as_deref() == Some("Idle") && r.wpos.is_some_and(|p| (p[0] - 3.0).abs() < 1e-3)
+    });
+    eprintln!("the session on the firmware: {:?}", r.wpos);
+    drop(s);
+    drop(grbl);
+    std::fs::remove_dir_all(d).unwrap();
+}
+
 /// Every error and alarm code GRBL 1.1h documents (its own `doc/csv`) is
 /// told with its meaning, never as unknown.
 #[test]

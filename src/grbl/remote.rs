@@ -2,7 +2,14 @@
 //! Machine panel): the sender tells it what GRBL says and how far the job
 //! is, and takes its realtime bytes (hold, start, overrides), its stop and
 //! its "go on" at a pause, in place of the terminal's keys and prompt.
+//! At a tool change the sender stops before the M0, so the machine stands
+//! Idle and takes the page's lines (jog, zero, probe); going on, it puts
+//! the machine back in the job's state there (`resume::reentry_at`).
 
+use super::replies::{parse_status, Replies};
+use super::state::State;
+use crate::bail;
+use crate::error::Result;
 use std::collections::VecDeque;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
@@ -30,6 +37,7 @@ type Listener = dyn Fn(Told) + Send + Sync;
 #[derive(Clone)]
 pub struct Remote {
     bytes: Arc<Mutex<VecDeque<u8>>>,
+    lines: Arc<Mutex<VecDeque<String>>>,
     go_on: Arc<AtomicBool>,
     pub stop: Arc<AtomicBool>,
     listener: Arc<Listener>,
@@ -45,6 +53,7 @@ impl Remote {
     pub fn new(listener: impl Fn(Told) + Send + Sync + 'static) -> Remote {
         Remote {
             bytes: Arc::default(),
+            lines: Arc::default(),
             go_on: Arc::default(),
             stop: Arc::default(),
             listener: Arc::new(listener),
@@ -77,5 +86,86 @@ impl Remote {
 
     pub fn tell(&self, t: Told) {
         (self.listener)(t)
+    }
+
+    /// A line from the page for a job held at a tool change.
+    pub fn push_line(&self, l: &str) {
+        let mut q = self.lines.lock().unwrap_or_else(|e| e.into_inner());
+        q.push_back(l.to_string());
+    }
+
+    fn take_line(&self) -> Option<String> {
+        let mut q = self.lines.lock().unwrap_or_else(|e| e.into_inner());
+        q.pop_front()
+    }
+
+    /// Held before a pause line `what` with the machine Idle: the page's
+    /// realtime bytes and lines go through (one line at a time, each
+    /// answered), the readout stays live; once told to go on with the
+    /// machine Idle and nothing left to send, `back` (the job's own state
+    /// there) is sent, each line answered, and the job goes on. Returns
+    /// at once when told to stop.
+    pub fn tool_change(
+        &self,
+        r: &mut Replies,
+        what: String,
+        back: &[String],
+        poll: f64,
+    ) -> Result<()> {
+        self.tell(Told::Paused(Some(what)));
+        let mut last_poll = f64::MIN;
+        let (mut awaiting, mut idle) = (false, true);
+        loop {
+            if self.stop.load(Ordering::Relaxed) {
+                return Ok(());
+            }
+            let bytes = self.take_bytes();
+            if !bytes.is_empty() {
+                r.port.write_all(&bytes)?;
+            }
+            if !awaiting {
+                if let Some(l) = self.take_line() {
+                    r.port.write_all(format!("{l}\n").as_bytes())?;
+                    awaiting = true;
+                }
+            }
+            if r.port.now() - last_poll >= poll {
+                r.port.write_all(&[super::STATUS])?;
+                last_poll = r.port.now();
+            }
+            if let Some(l) = r.next(0.05)? {
+                self.tell(Told::Heard(&l));
+                awaiting &= !(l == "ok" || l.starts_with("error:"));
+                if let Some(st) = parse_status(&l) {
+                    idle = st.state == State::Idle;
+                }
+            }
+            let queued = !self
+                .lines
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .is_empty();
+            if idle && !awaiting && !queued && self.take_go_on() {
+                break;
+            }
+        }
+        for l in back {
+            r.port.write_all(format!("{l}\n").as_bytes())?;
+            let until = r.port.now() + 10.0;
+            loop {
+                let Some(a) = r.next(until - r.port.now())? else {
+                    bail!("going back to the job after the tool change: no answer to '{l}'");
+                };
+                self.tell(Told::Heard(&a));
+                if a.starts_with("error:") {
+                    bail!("going back to the job after the tool change: GRBL refused '{l}': {a}");
+                }
+                if a == "ok" {
+                    break;
+                }
+            }
+        }
+        self.tell(Told::Paused(None));
+        Ok(())
     }
 }

@@ -212,17 +212,26 @@ impl Tracker {
 /// in the coordinates without it, and set again there with G92: the
 /// machine then reads the job's own coordinates at the very same place.
 pub fn reentry(lines: &[JobLine], from: usize) -> Vec<String> {
-    let parsed = |l: &JobLine| parse_line(&l.text, l.number);
-    let top = lines
-        .iter()
-        .map(parsed)
-        .flat_map(|p| p.words.into_iter().filter(|w| w.0 == 'Z'))
-        .fold(0.0f64, |t, w| t.max(w.1));
     let mut m = Modal::new(DVec3::ZERO);
-    for p in lines[..from].iter().map(parsed) {
+    for p in lines[..from].iter().map(|l| parse_line(&l.text, l.number)) {
         // a line GRBL would refuse changes nothing there either
         let _ = m.apply(&p);
     }
+    reentry_at(&m, highest_z(lines))
+}
+
+/// The highest Z a job's lines name (its safe height, or above it).
+pub fn highest_z(lines: &[JobLine]) -> f64 {
+    lines
+        .iter()
+        .map(|l| parse_line(&l.text, l.number))
+        .flat_map(|p| p.words.into_iter().filter(|w| w.0 == 'Z'))
+        .fold(0.0f64, |t, w| t.max(w.1))
+}
+
+/// Lines that put the machine back in the job's modal state `m`, at its
+/// position, by way of `top` (or 5 mm, or where it stands, the highest).
+pub fn reentry_at(m: &Modal, top: f64) -> Vec<String> {
     // in the job's work coordinates, its coordinate system and tool
     // length offset restored first (a reset keeps the former, not the
     // latter)

@@ -415,8 +415,14 @@ impl Session {
         if !r.connected {
             return Err("not connected".into());
         }
-        if r.job.as_ref().is_some_and(|j| j.running) {
-            return Err("a job is running: hold or stop it first".into());
+        if let Some(j) = r.job.as_ref().filter(|j| j.running) {
+            if j.paused.is_none() {
+                return Err("a job is running: lines wait for its tool change".into());
+            }
+            // held at a tool change: the sender passes it on
+            self.remote.push_line(text);
+            self.shared.update(|s| s.say("sent", text, None));
+            return Ok(());
         }
         if r.pending >= MAX_QUEUED {
             return Err(format!("{} lines already wait for GRBL", r.pending));

@@ -9,7 +9,7 @@
 use super::lines::JobLine;
 use super::remote::{Remote, Told};
 use super::replies::{parse_status, Replies, Status};
-use super::resume::{Journal, Tracker};
+use super::resume::{highest_z, reentry_at, Journal, Tracker};
 use super::sender::{OnPause, Options, Outcome, Stop};
 use super::state::State;
 use super::touchoff::touch_off;
@@ -299,6 +299,14 @@ impl<'a> Stream<'a> {
         let mut batch = Vec::new();
         while self.phase == Phase::Sending && self.next < self.items.len() {
             let item = &self.items[self.next];
+            // the page's tool change: not the M0, but a stop before it
+            if self.page_pauses() && item.job.is_some_and(|k| self.lines[k].pause) {
+                self.phase = Phase::AtPause {
+                    item: self.next,
+                    released: false,
+                };
+                break;
+            }
             let len = item.text.len() + 1;
             let fits = if self.opts.char_counting {
                 self.used + len <= self.budget || self.inflight.is_empty()
@@ -426,16 +434,19 @@ impl<'a> Stream<'a> {
             } if self.inflight.front().is_none_or(|f| f.0 >= item) => Some(item),
             _ => None,
         };
-        if let (Some(item), State::Hold(_)) = (at_pause, st.state) {
+        let page = self.page_pauses();
+        let standing = match page {
+            true => self.inflight.is_empty() && st.state == State::Idle,
+            false => matches!(st.state, State::Hold(_)),
+        };
+        if let (Some(item), true, true) = (at_pause, standing, page) {
+            self.page_tool_change(r, item)?;
+        } else if let (Some(item), true) = (at_pause, standing) {
             let k = self.items[item].job.unwrap_or(0);
             let (line, on) = (&self.lines[k], self.opts.on_pause);
             let progress = &self.progress;
-            match &self.opts.remote {
-                Some(rm) if on != OnPause::Continue => wait_for_page(r, rm, line, self.poll)?,
-                _ => self
-                    .keys
-                    .cooked(|| progress.suspend(|| resume_pause(r, line, on)))?,
-            }
+            self.keys
+                .cooked(|| progress.suspend(|| resume_pause(r, line, on)))?;
             self.phase = Phase::AtPause {
                 item,
                 released: true,
@@ -521,6 +532,42 @@ impl<'a> Stream<'a> {
         Ok(())
     }
 
+    /// Pauses are the page's: the sender stops before an M0 (see
+    /// `remote`), not at it.
+    fn page_pauses(&self) -> bool {
+        !self.check_mode && self.opts.remote.is_some() && self.opts.on_pause != OnPause::Continue
+    }
+
+    /// The page's tool change before pause item `item`; the M0 itself is
+    /// not sent (the machine stood Idle for the change), so it counts as
+    /// answered.
+    fn page_tool_change(&mut self, r: &mut Replies, item: usize) -> Result<()> {
+        let Some(rm) = self.opts.remote.as_ref() else {
+            return Ok(());
+        };
+        let k = self.items[item].job.unwrap_or(0);
+        let line = &self.lines[k];
+        let mut what = format!("paused at job line {} '{}'", line.number, line.original);
+        if !line.note.is_empty() {
+            what.push_str(&format!(" ({})", line.note));
+        }
+        let state = line.state.as_deref().cloned();
+        let state = state.unwrap_or_else(|| Modal::new(DVec3::ZERO));
+        let back = reentry_at(&state, highest_z(self.lines));
+        rm.tool_change(r, what, &back, self.poll)?;
+        if let Some(j) = self.journal.as_mut() {
+            j.sent(line.number)?;
+            j.acked(line.number)?;
+        }
+        self.out.acked += 1;
+        self.next = item + 1;
+        self.phase = Phase::Sending;
+        self.watch.hold_since = None;
+        self.watch.last_reply = r.port.now();
+        self.watch.last_sign = self.watch.last_reply;
+        Ok(())
+    }
+
     /// Released and answered: the touch-off if asked for, then on with the
     /// job.
     fn leave_pause(&mut self, r: &mut Replies) -> Result<()> {
@@ -602,35 +649,6 @@ fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
     } else {
         eprintln!("{what}: continuing (--on-pause continue)");
     }
-    r.port.write_all(&[CYCLE_START])
-}
-
-/// Held at a pause for the page: tell it, keep the readout live and pass
-/// its realtime bytes, until it says go on (cycle start) or stop.
-fn wait_for_page(r: &mut Replies, rm: &Remote, line: &JobLine, poll: f64) -> Result<()> {
-    let mut what = format!("paused at job line {} '{}'", line.number, line.original);
-    if !line.note.is_empty() {
-        what.push_str(&format!(" ({})", line.note));
-    }
-    rm.tell(Told::Paused(Some(what)));
-    let mut last_poll = f64::MIN;
-    while !rm.take_go_on() {
-        if rm.stop.load(Ordering::Relaxed) {
-            return Ok(());
-        }
-        let bytes = rm.take_bytes();
-        if !bytes.is_empty() {
-            r.port.write_all(&bytes)?;
-        }
-        if r.port.now() - last_poll >= poll {
-            r.port.write_all(&[STATUS])?;
-            last_poll = r.port.now();
-        }
-        if let Some(l) = r.next(0.05)? {
-            rm.tell(Told::Heard(&l));
-        }
-    }
-    rm.tell(Told::Paused(None));
     r.port.write_all(&[CYCLE_START])
 }
 

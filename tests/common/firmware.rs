@@ -109,10 +109,14 @@ fn one_core() -> &'static str {
 pub struct OnPty {
     pub tty: PathBuf,
     child: std::process::Child,
+    /// One firmware at a time: both its threads spin, on one core.
+    _alone: std::sync::MutexGuard<'static, ()>,
 }
 
 impl OnPty {
     pub fn start(fw: &Firmware, dir: &Path) -> OnPty {
+        static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let alone = ONE.lock().unwrap_or_else(|e| e.into_inner());
         let tty = dir.join("tty");
         let exec = format!(
             "EXEC:'{}{} -n -s /dev/null -b {}',pty,raw,echo=0",
@@ -137,7 +141,11 @@ impl OnPty {
         assert!(tty.exists(), "socat made no pty at {}", tty.display());
         // the firmware's welcome comes about a second after power-up
         std::thread::sleep(std::time::Duration::from_millis(1500));
-        OnPty { tty, child }
+        OnPty {
+            tty,
+            child,
+            _alone: alone,
+        }
     }
 }
 

@@ -68,6 +68,7 @@ function showReadout(r) {
   $('m-fs').textContent = fs + (r.pending ? ` · ${r.pending} line(s) waiting` : '');
   if (r.job !== undefined) M.job = r.job;
   showJob(M.job);
+  drawMap(r.connected ? r.wpos : null);
 }
 
 function clock(s) {
@@ -94,6 +95,52 @@ function showJob(j) {
   $('m-pause').hidden = !j.paused;
   $('m-pausetext').textContent = j.paused || '';
   $('m-resume').hidden = !(j.resumable && !running);
+}
+
+/// The job from above (its cutting moves over the stock) with the tool's
+/// marker where the machine reports it, in work coordinates.
+const MAP = { job: null, base: null, fit: null };
+
+function mapFit(h) {
+  const c = $('m-map'), pad = 14;
+  const st = h.stock;
+  const s = Math.min((c.width - 2 * pad) / st.width, (c.height - 2 * pad) / st.height);
+  const ox = (c.width - s * st.width) / 2 - s * st.x0, oy = (c.height + s * st.height) / 2 + s * st.y0;
+  return { s, px: (x) => ox + s * x, py: (y) => oy - s * y };
+}
+
+function mapBase() {
+  const c = $('m-map');
+  const base = document.createElement('canvas');
+  base.width = c.width; base.height = c.height;
+  const g = base.getContext('2d');
+  g.fillStyle = '#3a3835'; g.fillRect(0, 0, c.width, c.height);
+  const j = S.job;
+  if (!j) return { base, fit: null };
+  const h = j.head, f = mapFit(h), st = h.stock;
+  g.fillStyle = '#c9a66b';
+  g.fillRect(f.px(st.x0), f.py(st.y0 + st.height), f.s * st.width, f.s * st.height);
+  const m = j.arrays.moves;
+  g.strokeStyle = 'rgba(60, 40, 20, 0.55)'; g.lineWidth = 1;
+  g.beginPath();
+  for (let i = 0; i + 7 < m.length; i += 8) {
+    if (m[i + 3] < 0.5) continue;  // rapids left out
+    g.moveTo(f.px(m[i]), f.py(m[i + 1]));
+    g.lineTo(f.px(m[i + 4]), f.py(m[i + 5]));
+  }
+  g.stroke();
+  return { base, fit: f };
+}
+
+function drawMap(wpos) {
+  if (!MAP.base || MAP.job !== S.job) { Object.assign(MAP, mapBase()); MAP.job = S.job; }
+  const c = $('m-map'), g = c.getContext('2d');
+  g.drawImage(MAP.base, 0, 0);
+  if (!wpos || !MAP.fit) return;
+  const x = MAP.fit.px(wpos[0]), y = MAP.fit.py(wpos[1]);
+  g.strokeStyle = '#ff2d20'; g.fillStyle = 'rgba(255, 45, 32, 0.85)'; g.lineWidth = 2;
+  g.beginPath(); g.arc(x, y, 6, 0, 2 * Math.PI); g.fill();
+  g.beginPath(); g.moveTo(x - 12, y); g.lineTo(x + 12, y); g.moveTo(x, y - 12); g.lineTo(x, y + 12); g.stroke();
 }
 
 function watch() {
