@@ -215,6 +215,10 @@ fn send_streams_a_job_to_the_firmware() {
     std::fs::remove_dir_all(d).unwrap();
 }
 
+/// A short job with a tool change (11 lines, ending at work X3 Y1 Z5).
+const TOOL_CHANGE_JOB: &str = "G21 G90 G94\nG0 Z2\nG1 X2 Y1 F600\nG0 Z5\nM5\n\
+    M0 (fit the 1 mm ball)\nG0 X1 Y1\nG1 Z0 F300\nG1 X3 F600\nG0 Z5\nM2\n";
+
 /// The studio's Machine panel's connection on the firmware: it reads
 /// GRBL's own status reports (work offset, overrides, buffer), jogs and
 /// zeroes, tells a refusal's meaning, and lends its port to the sender
@@ -268,12 +272,7 @@ fn the_machine_panel_s_session_drives_the_firmware() {
 
     // a short job with a tool change, lent the port like the page's Run
     let job = d.join("change.nc");
-    std::fs::write(
-        &job,
-        "G21 G90 G94\nG0 Z2\nG1 X2 Y1 F600\nG0 Z5\nM5\nM0 (fit the 1 mm ball)\n\
-         G0 X1 Y1\nG1 Z0 F300\nG1 X3 F600\nG0 Z5\nM2\n",
-    )
-    .unwrap();
+    std::fs::write(&job, TOOL_CHANGE_JOB).unwrap();
     let run = SendJob {
         job: job.clone(),
         rx_buffer: 128,
@@ -322,6 +321,75 @@ fn the_machine_panel_s_session_drives_the_firmware() {
     drop(s);
     drop(grbl);
     std::fs::remove_dir_all(d).unwrap();
+}
+
+/// The Machine panel in Chromium on the real firmware, the flow of the
+/// studio test without the probe: connect, jog, zero, a job file brought
+/// to the page, checked in GRBL's check mode, run to its tool change
+/// (the machine Idle, jogged there), continued to its end.
+#[test]
+fn the_page_drives_the_firmware() {
+    use common::browser::{Browser, Studio};
+    let Some(fw) = firmware("the_page_drives_the_firmware") else {
+        return;
+    };
+    let d = scratch("fw-page");
+    let Some(b) = Browser::start(&d) else {
+        return;
+    };
+    let grbl = OnPty::start(fw, &d);
+    let studio = Studio::start(&[]);
+    let text = |css: &str, what: &str, secs: u64, f: &dyn Fn(&str) -> bool| -> String {
+        b.wait(what, secs, || {
+            let t = b.text(css);
+            f(&t).then_some(t)
+        })
+    };
+    b.goto(&studio.url);
+    b.click("#machine-tab");
+    b.script("document.getElementById('m-port').value = ''");
+    b.keys("#m-port", grbl.tty.to_str().unwrap());
+    b.click("#m-conn");
+    text("#m-state", "Idle", 20, &|t| t == "Idle");
+    b.script("document.getElementById('m-step').value = '10'");
+    b.click("[data-jog='x+']");
+    text("#m-mx", "machine X 10", 30, &|t| t == "10.000");
+    b.click("[data-zero='x']");
+    text("#m-wx", "work X 0", 20, &|t| t == "0.000");
+
+    let job = d.join("change.nc");
+    std::fs::write(&job, TOOL_CHANGE_JOB).unwrap();
+    b.keys("#m-nc", job.to_str().unwrap());
+    text("#m-source", "the file chosen", 20, &|t| {
+        t.contains("(11 lines)")
+    });
+    b.click("#m-check");
+    text("#m-jobtext", "the check", 60, &|t| {
+        t.contains("check passed")
+    });
+    b.click("#m-run");
+    let pause = text("#m-pausetext", "the tool change", 60, &|t| t.contains("M0"));
+    assert!(pause.contains("fit the 1 mm ball"), "{pause}");
+    text("#m-state", "Idle at the change", 20, &|t| t == "Idle");
+    let z = b.text("#m-wz").parse::<f64>().unwrap();
+    b.click("[data-jog='z+']");
+    text("#m-wz", "jogged up", 30, &|t| {
+        t.parse::<f64>().ok() == Some(z + 10.0)
+    });
+    b.click("#m-continue");
+    let done = text("#m-jobtext", "the end", 60, &|t| {
+        t.starts_with("done") || t.contains("error") || t.contains("stopped")
+    });
+    assert!(done.starts_with("done"), "{done}");
+    text("#m-wx", "the job's last X", 30, &|t| t == "3.000");
+    b.shot("#machine-panel")
+        .save(d.join("firmware-panel.png"))
+        .unwrap();
+    eprintln!(
+        "the page on the firmware: {done}; {}",
+        d.join("firmware-panel.png").display()
+    );
+    drop(grbl);
 }
 
 /// Every error and alarm code GRBL 1.1h documents (its own `doc/csv`) is

@@ -199,11 +199,12 @@ fn bad_uploads_and_requests_leave_the_studio_serving() {
     assert!(msg.contains("more than the 128 MB"), "{msg}");
     // ...and by the server from its declared length alone
     let host = studio.url.trim_start_matches("http://").to_string();
+    // (the secret first: not while a half-sent request holds a connection)
+    let secret = secret_of(&studio.url);
     let mut s = std::net::TcpStream::connect(&host).unwrap();
     write!(
         s,
-        "POST /api/model?name=huge.stl HTTP/1.1\r\nHost: {host}\r\nX-Relievo-Secret: {}\r\nContent-Length: 200000000\r\n\r\nsolid",
-        secret_of(&studio.url)
+        "POST /api/model?name=huge.stl HTTP/1.1\r\nHost: {host}\r\nX-Relievo-Secret: {secret}\r\nContent-Length: 200000000\r\n\r\nsolid",
     )
     .unwrap();
     let mut head = [0u8; 64];
@@ -213,7 +214,6 @@ fn bad_uploads_and_requests_leave_the_studio_serving() {
     drop(s);
     // malformed requests: a clear error each
     let http = agent();
-    let secret = secret_of(&studio.url);
     let api = |path: &str, body: &str| {
         let mut r = http
             .post(format!("{}{path}", studio.url))

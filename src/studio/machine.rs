@@ -10,21 +10,61 @@ use crate::grbl::port::SerialLink;
 use crate::grbl::session::{self, JobRun, Realtime, Session};
 use crate::ops::send::SendJob;
 use serde_json::{json, Value};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 
-/// The studio's one machine connection.
+/// The studio's one machine connection, and a job file the carver
+/// brought (instead of the studio's own job).
 #[derive(Default)]
-pub struct Slot(Mutex<Option<Arc<Session>>>);
+pub struct Slot {
+    session: Mutex<Option<Arc<Session>>>,
+    /// Where the file is kept, and its name as the carver knows it.
+    uploaded: Mutex<Option<(PathBuf, String)>>,
+    uploads: std::sync::atomic::AtomicUsize,
+}
 
 impl Slot {
     pub fn get(&self) -> Option<Arc<Session>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        self.session
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .clone()
     }
 
     fn set(&self, s: Option<Arc<Session>>) -> Option<Arc<Session>> {
-        std::mem::replace(&mut *self.0.lock().unwrap_or_else(|e| e.into_inner()), s)
+        std::mem::replace(
+            &mut *self.session.lock().unwrap_or_else(|e| e.into_inner()),
+            s,
+        )
     }
+}
+
+/// Largest job file the page may bring (bytes).
+pub const MAX_NC: usize = 64 << 20;
+
+/// A job file from the page: read as the sender reads it (every line
+/// one GRBL takes), kept in the studio's folder for Run and Check.
+pub fn upload(studio: &Studio, name: &str, body: &[u8]) -> Reply {
+    let Ok(text) = std::str::from_utf8(body) else {
+        return Reply::error(400, format!("{name}: not a text file"));
+    };
+    let lines = match crate::grbl::sender::job_lines(text, name) {
+        Ok(l) if !l.is_empty() => l,
+        Ok(_) => return Reply::error(400, format!("{name}: no G-code in it")),
+        Err(e) => return Reply::error(400, e.0),
+    };
+    let n = studio.machine.uploads.fetch_add(1, Ordering::SeqCst);
+    let path = studio.dir.join(format!("upload-{n}.nc"));
+    if let Err(e) = std::fs::write(&path, body) {
+        return Reply::error(500, format!("{}: {e}", path.display()));
+    }
+    *studio
+        .machine
+        .uploaded
+        .lock()
+        .unwrap_or_else(|e| e.into_inner()) = Some((path, name.to_string()));
+    Reply::json(200, json!({"name": name, "lines": lines.len()}))
 }
 
 /// What a call sends: whichever fields it needs.
@@ -48,6 +88,8 @@ pub struct Call {
     check: bool,
     /// run: from the journal's safe resume point.
     resume: bool,
+    /// run: the job file the page brought, not the studio's job.
+    uploaded: bool,
 }
 
 /// The serial ports found on this machine.
@@ -160,11 +202,21 @@ fn probe(s: &Session, call: &Call) -> Result<(), String> {
 /// sender's (feed hold, spindle off once held), then a soft reset, which
 /// GRBL needs to drop what it has buffered.
 fn run(studio: &Studio, s: &Session, call: &Call) -> Result<(), String> {
-    let Some(j) = studio.last_job() else {
-        return Err("run: make a job first (the Job tab)".into());
+    let (path, name) = if call.uploaded {
+        let up = studio
+            .machine
+            .uploaded
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        up.clone().ok_or("run: bring a job file first")?
+    } else {
+        match studio.last_job() {
+            Some(j) => (j.dir.join("job.nc"), "job.nc".to_string()),
+            None => return Err("run: make a job first (the Job tab)".into()),
+        }
     };
     let job = SendJob {
-        job: j.dir.join("job.nc"),
+        job: path,
         check_only: call.check,
         rx_buffer: 128,
         remote: Some(s.remote()),
@@ -178,11 +230,10 @@ fn run(studio: &Studio, s: &Session, call: &Call) -> Result<(), String> {
     let (shared, stop, check) = (s.shared.clone(), s.remote().stop, call.check);
     let shown = JobRun {
         name: if call.resume {
-            "job.nc (resumed)"
+            format!("{name} (resumed)")
         } else {
-            "job.nc"
-        }
-        .into(),
+            name
+        },
         check,
         ..JobRun::default()
     };

@@ -302,6 +302,13 @@ fn route(rq: &mut Request, studio: &Studio) -> Reply {
         (Method::Get, "/machine.js") => Reply::file_inline("text/javascript", page::MACHINE),
         (Method::Get, "/api/machine/ports") => machine::ports(),
         (Method::Get, "/api/machine/state") => machine::state(studio),
+        (Method::Post, "/api/machine/upload") => {
+            let name = query(&url, "name").unwrap_or_else(|| "job.nc".into());
+            match body(rq, machine::MAX_NC) {
+                Ok(b) => machine::upload(studio, &name, &b),
+                Err(r) => r,
+            }
+        }
         (Method::Post, p) if p.starts_with("/api/machine/") => {
             let call = body(rq, MAX_JSON).and_then(|b| {
                 serde_json::from_slice::<machine::Call>(&b)

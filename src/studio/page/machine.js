@@ -195,9 +195,24 @@ function machineInit() {
   });
   $('m-probe-go').addEventListener('click', () => machineCall('probe', { thickness: parseFloat($('m-plate').value) || 0 }));
   $('m-frame').addEventListener('click', () => machineCall('frame', {}));
-  $('m-run').addEventListener('click', () => machineCall('run', {}));
-  $('m-check').addEventListener('click', () => machineCall('run', { check: true }));
-  $('m-resume').addEventListener('click', () => machineCall('run', { resume: true }));
+  const uploaded = () => $('m-source').value === 'upload';
+  $('m-run').addEventListener('click', () => machineCall('run', { uploaded: uploaded() }));
+  $('m-check').addEventListener('click', () => machineCall('run', { check: true, uploaded: uploaded() }));
+  $('m-resume').addEventListener('click', () => machineCall('run', { resume: true, uploaded: uploaded() }));
+  $('m-nc').addEventListener('change', async () => {
+    const f = $('m-nc').files[0];
+    if (!f) return;
+    try {
+      const r = await call('/api/machine/upload?name=' + encodeURIComponent(f.name), { method: 'POST', body: f });
+      let o = $('m-source').querySelector('option[value=upload]');
+      if (!o) { o = document.createElement('option'); o.value = 'upload'; $('m-source').appendChild(o); }
+      o.textContent = `${r.name} (${r.lines} lines)`;
+      $('m-source').value = 'upload';
+      consoleLine({ dir: 'note', text: `${r.name}: ${r.lines} lines to run` });
+    } catch (e) {
+      consoleLine({ dir: 'note', text: e.message });
+    }
+  });
   $('m-stop').addEventListener('click', () => machineCall('stop'));
   $('m-continue').addEventListener('click', () => machineCall('continue'));
   $('m-send').addEventListener('submit', (e) => {
