@@ -88,15 +88,13 @@ impl Remote {
         (self.listener)(t)
     }
 
-    /// A line from the page for a job held at a tool change.
-    pub fn push_line(&self, l: &str) {
-        let mut q = self.lines.lock().unwrap_or_else(|e| e.into_inner());
-        q.push_back(l.to_string());
+    fn queue(&self) -> std::sync::MutexGuard<'_, VecDeque<String>> {
+        self.lines.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    fn take_line(&self) -> Option<String> {
-        let mut q = self.lines.lock().unwrap_or_else(|e| e.into_inner());
-        q.pop_front()
+    /// A line from the page for a job held at a tool change.
+    pub fn push_line(&self, l: &str) {
+        self.queue().push_back(l.to_string());
     }
 
     /// Held before a pause line `what` with the machine Idle: the page's
@@ -124,7 +122,7 @@ impl Remote {
                 r.port.write_all(&bytes)?;
             }
             if !awaiting {
-                if let Some(l) = self.take_line() {
+                if let Some(l) = self.queue().pop_front() {
                     r.port.write_all(format!("{l}\n").as_bytes())?;
                     awaiting = true;
                 }
@@ -140,29 +138,23 @@ impl Remote {
                     idle = st.state == State::Idle;
                 }
             }
-            let queued = !self
-                .lines
-                .lock()
-                .unwrap_or_else(|e| e.into_inner())
-                .is_empty();
+            let queued = !self.queue().is_empty();
             if idle && !awaiting && !queued && self.take_go_on() {
                 break;
             }
         }
         for l in back {
-            r.port.write_all(format!("{l}\n").as_bytes())?;
-            let until = r.port.now() + 10.0;
-            loop {
-                let Some(a) = r.next(until - r.port.now())? else {
-                    bail!("going back to the job after the tool change: no answer to '{l}'");
-                };
-                self.tell(Told::Heard(&a));
-                if a.starts_with("error:") {
-                    bail!("going back to the job after the tool change: GRBL refused '{l}': {a}");
-                }
-                if a == "ok" {
-                    break;
-                }
+            let reply = r.command(l, 10.0).map_err(|e| {
+                crate::Error(format!(
+                    "going back to the job after the tool change: {}",
+                    e.0
+                ))
+            })?;
+            for a in &reply {
+                self.tell(Told::Heard(a));
+            }
+            if let Some(a) = reply.last().filter(|a| a.starts_with("error:")) {
+                bail!("going back to the job after the tool change: GRBL refused '{l}': {a}");
             }
         }
         self.tell(Told::Paused(None));

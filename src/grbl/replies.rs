@@ -112,35 +112,70 @@ impl<'a> Replies<'a> {
     }
 }
 
-/// A status report: `<State|MPos:x,y,z|Bf:blocks,bytes|...>`.
+/// A status report: `<State|MPos:x,y,z|Bf:blocks,bytes|...>`, each field
+/// GRBL 1.1 may send (which ones, `$10` and the report's turn decide).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Status {
     pub state: State,
+    /// MPos, or WPos when the report gives that instead (`$10`).
     pub pos: [f64; 3],
+    /// `pos` is WPos.
+    pub work: bool,
     /// Free planner blocks and free receive-buffer bytes.
     pub free: Option<(usize, usize)>,
+    /// The work coordinate offset, in the reports that carry it.
+    pub wco: Option<[f64; 3]>,
+    /// Actual feed, and spindle speed (`FS:`; `F:` has no spindle).
+    pub feed: Option<(f64, Option<f64>)>,
+    /// Feed, rapid and spindle overrides, percent (every few reports).
+    pub overrides: Option<[u32; 3]>,
+    /// Input pins that read active (`Pn:`).
+    pub pins: String,
+    /// Spindle and coolant (`A:`).
+    pub accessories: String,
 }
 
-/// Parse a status report line.
+/// The first `N` comma-separated numbers of a field (GRBL built with
+/// more axes sends more).
+fn numbers<T: std::str::FromStr + Copy + Default, const N: usize>(v: &str) -> Option<[T; N]> {
+    let mut out = [T::default(); N];
+    let mut it = v.split(',');
+    for x in out.iter_mut() {
+        *x = it.next()?.parse().ok()?;
+    }
+    Some(out)
+}
+
+/// Parse a status report line (None for anything else, or a garbled one).
 pub fn parse_status(l: &str) -> Option<Status> {
     let body = l.strip_prefix('<')?.strip_suffix('>')?;
     let mut parts = body.split('|');
-    let state = State::parse(parts.next()?)?;
-    let mut pos = [0.0; 3];
-    let mut bf = None;
+    let mut st = Status {
+        state: State::parse(parts.next()?)?,
+        pos: [0.0; 3],
+        work: false,
+        free: None,
+        wco: None,
+        feed: None,
+        overrides: None,
+        pins: String::new(),
+        accessories: String::new(),
+    };
     for p in parts {
-        if let Some(v) = p.strip_prefix("MPos:").or_else(|| p.strip_prefix("WPos:")) {
-            for (k, x) in v.split(',').take(3).enumerate() {
-                pos[k] = x.parse().ok()?;
-            }
-        } else if let Some(v) = p.strip_prefix("Bf:") {
-            let (a, b) = v.split_once(',')?;
-            bf = Some((a.parse().ok()?, b.parse().ok()?));
+        let Some((key, v)) = p.split_once(':') else {
+            continue;
+        };
+        match key {
+            "MPos" | "WPos" => (st.pos, st.work) = (numbers(v)?, key == "WPos"),
+            "Bf" => st.free = Some(numbers::<usize, 2>(v).map(|[a, b]| (a, b))?),
+            "WCO" => st.wco = Some(numbers(v)?),
+            "FS" => st.feed = Some(numbers::<f64, 2>(v).map(|[f, s]| (f, Some(s)))?),
+            "F" => st.feed = Some((numbers::<f64, 1>(v)?[0], None)),
+            "Ov" => st.overrides = Some(numbers(v)?),
+            "Pn" => st.pins = v.to_string(),
+            "A" => st.accessories = v.to_string(),
+            _ => {}
         }
     }
-    Some(Status {
-        state,
-        pos,
-        free: bf,
-    })
+    Some(st)
 }

@@ -8,7 +8,7 @@
 
 use super::port::Port;
 use super::remote::{Remote, Told};
-use super::replies::Replies;
+use super::replies::{parse_status, Replies};
 use super::state::State;
 use super::{alarm_meaning, error_meaning, STATUS};
 use crate::error::Result;
@@ -228,15 +228,18 @@ impl Readout {
         }
     }
 
-    /// A line GRBL said during a job: status into the readout, answers
-    /// other than `ok` into the console. Whether the page needs telling.
-    fn heard_in_job(&mut self, l: &str) -> bool {
+    /// A line GRBL said: a status report into the readout, anything else
+    /// into the console with the meaning of its error or alarm code (an
+    /// `ok` only when `log_ok`: a job's are too many). Whether the page
+    /// needs telling.
+    fn take(&mut self, l: &str, log_ok: bool) -> bool {
         if l.starts_with('<') {
             let before = self.glance();
             self.status(l);
-            return before != self.glance();
+            let was_silent = std::mem::replace(&mut self.silent, false);
+            return before != self.glance() || was_silent;
         }
-        if l == "ok" {
+        if l == "ok" && !log_ok {
             return false;
         }
         let code = |p: &str| l.strip_prefix(p).and_then(|c| c.parse::<u32>().ok());
@@ -253,57 +256,28 @@ impl Readout {
     /// Take a status report's fields (a report leaves out what it has
     /// not changed: WCO and Ov come every few reports).
     fn status(&mut self, l: &str) -> bool {
-        let Some(body) = l.strip_prefix('<').and_then(|b| b.strip_suffix('>')) else {
+        let Some(st) = parse_status(l) else {
             return false;
         };
-        let mut parts = body.split('|');
-        let Some(state) = parts.next().and_then(State::parse) else {
-            return false;
-        };
-        let three = |v: &str| -> Option<[f64; 3]> {
-            let v: Vec<f64> = v
-                .split(',')
-                .map(|x| x.parse().ok())
-                .collect::<Option<_>>()?;
-            (v.len() >= 3).then(|| [v[0], v[1], v[2]])
-        };
-        let (mut mpos, mut wpos) = (None, None);
-        self.pins.clear();
-        self.accessories.clear();
-        for p in parts {
-            let Some((key, v)) = p.split_once(':') else {
-                continue;
-            };
-            match key {
-                "MPos" => mpos = three(v),
-                "WPos" => wpos = three(v),
-                "WCO" => self.wco = three(v),
-                "FS" | "F" => {
-                    let mut it = v.split(',').map(|x| x.parse::<f64>().ok());
-                    self.feed = it.next().flatten();
-                    self.spindle = it.next().flatten().or(self.spindle);
-                }
-                "Ov" => {
-                    let o: Vec<u32> = v.split(',').filter_map(|x| x.parse().ok()).collect();
-                    self.overrides = (o.len() == 3).then(|| [o[0], o[1], o[2]]);
-                }
-                "Bf" => {
-                    let b: Vec<u32> = v.split(',').filter_map(|x| x.parse().ok()).collect();
-                    self.buffer = (b.len() == 2).then(|| [b[0], b[1]]);
-                }
-                "Pn" => self.pins = v.to_string(),
-                "A" => self.accessories = v.to_string(),
-                _ => {}
-            }
-        }
+        self.wco = st.wco.or(self.wco);
         let wco = self.wco.unwrap_or_default();
-        let sub = |a: [f64; 3], s: f64| [0, 1, 2].map(|k| a[k] + s * wco[k]);
-        self.mpos = mpos.or(wpos.map(|w| sub(w, 1.0)));
-        self.wpos = wpos.or(mpos.map(|m| sub(m, -1.0)));
-        if state != State::Alarm {
+        let other = [0, 1, 2].map(|k| st.pos[k] + if st.work { wco[k] } else { -wco[k] });
+        (self.mpos, self.wpos) = if st.work {
+            (Some(other), Some(st.pos))
+        } else {
+            (Some(st.pos), Some(other))
+        };
+        if let Some((feed, spindle)) = st.feed {
+            self.feed = Some(feed);
+            self.spindle = spindle.or(self.spindle);
+        }
+        self.overrides = st.overrides.or(self.overrides);
+        self.buffer = st.free.map(|(b, r)| [b as u32, r as u32]).or(self.buffer);
+        (self.pins, self.accessories) = (st.pins, st.accessories);
+        if st.state != State::Alarm {
             self.alarm = None;
         }
-        self.state = Some(state.to_string());
+        self.state = Some(st.state.to_string());
         true
     }
 }
@@ -514,7 +488,7 @@ fn job_remote(shared: Arc<Shared>) -> Remote {
     Remote::new(move |t| match t {
         Told::Heard(l) => {
             let mut g = shared.lock();
-            if g.heard_in_job(l) {
+            if g.take(l, false) {
                 g.seq += 1;
                 shared.changed.notify_all();
             }
@@ -617,36 +591,20 @@ impl<'a> Link<'a> {
         }
     }
 
-    /// One line from GRBL into the readout and the console.
+    /// One line from GRBL into the readout and the console; the operator's
+    /// line it answers, or a reset that drops them all.
     fn heard(&mut self, l: &str) {
-        let queued = self.queue.len();
-        let changed;
         let mut g = self.shared.lock();
-        let before = g.glance();
-        if l.starts_with('<') {
-            g.status(l);
-            let was_silent = std::mem::replace(&mut g.silent, false);
-            changed = before != g.glance() || was_silent;
-        } else if l == "ok" || l.starts_with("error:") {
-            let code = l.strip_prefix("error:").and_then(|c| c.parse().ok());
-            g.say("got", l, code.map(error_meaning));
+        let changed = g.take(l, true);
+        if l == "ok" || l.starts_with("error:") {
             self.awaiting = None;
-            changed = true;
-        } else if let Some(code) = l.strip_prefix("ALARM:").and_then(|c| c.parse().ok()) {
-            g.alarm = Some((code, alarm_meaning(code)));
-            g.say("got", l, Some(alarm_meaning(code)));
-            changed = true;
-        } else {
-            if l.starts_with("Grbl ") {
-                // a reset: what was asked before it is gone
-                self.awaiting = None;
-                self.queue.clear();
-            }
-            g.say("got", l, None);
-            changed = true;
+        } else if l.starts_with("Grbl ") {
+            // a reset: what was asked before it is gone
+            self.awaiting = None;
+            self.queue.clear();
         }
         let pending = self.queue.len() + self.awaiting.is_some() as usize;
-        if changed || g.pending != pending || queued != self.queue.len() {
+        if changed || g.pending != pending {
             g.pending = pending;
             g.seq += 1;
             self.shared.changed.notify_all();

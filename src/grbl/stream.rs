@@ -11,6 +11,7 @@ use super::remote::{Remote, Told};
 use super::replies::{parse_status, Replies, Status};
 use super::resume::{highest_z, reentry_at, Journal, Tracker};
 use super::sender::{OnPause, Options, Outcome, Stop};
+use super::session::Realtime;
 use super::state::State;
 use super::touchoff::touch_off;
 use super::{CYCLE_START, FEED_HOLD, SPINDLE_STOP, STATUS};
@@ -285,9 +286,9 @@ impl<'a> Stream<'a> {
         let byte = match k {
             b' ' if self.holding => CYCLE_START,
             b' ' => FEED_HOLD,
-            b'+' => FEED_OVERRIDE_UP,
-            b'-' => FEED_OVERRIDE_DOWN,
-            b'0' => FEED_OVERRIDE_RESET,
+            b'+' => Realtime::FeedUp.byte(),
+            b'-' => Realtime::FeedDown.byte(),
+            b'0' => Realtime::FeedReset.byte(),
             _ => return Ok(()),
         };
         r.port.write_all(&[byte])
@@ -434,14 +435,17 @@ impl<'a> Stream<'a> {
             } if self.inflight.front().is_none_or(|f| f.0 >= item) => Some(item),
             _ => None,
         };
+        // the page's pause stands Idle before the M0, the terminal's in
+        // the M0's Hold
         let page = self.page_pauses();
-        let standing = match page {
-            true => self.inflight.is_empty() && st.state == State::Idle,
-            false => matches!(st.state, State::Hold(_)),
+        let standing = if page {
+            self.inflight.is_empty() && st.state == State::Idle
+        } else {
+            matches!(st.state, State::Hold(_))
         };
-        if let (Some(item), true, true) = (at_pause, standing, page) {
+        if let Some(item) = at_pause.filter(|_| standing && page) {
             self.page_tool_change(r, item)?;
-        } else if let (Some(item), true) = (at_pause, standing) {
+        } else if let Some(item) = at_pause.filter(|_| standing) {
             let k = self.items[item].job.unwrap_or(0);
             let (line, on) = (&self.lines[k], self.opts.on_pause);
             let progress = &self.progress;
@@ -651,11 +655,6 @@ fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
     }
     r.port.write_all(&[CYCLE_START])
 }
-
-/// GRBL's feed override bytes: +10%, -10%, 100%.
-const FEED_OVERRIDE_UP: u8 = 0x91;
-const FEED_OVERRIDE_DOWN: u8 = 0x92;
-const FEED_OVERRIDE_RESET: u8 = 0x90;
 
 /// Single keys from the terminal while a job streams: the terminal is
 /// put in non-canonical mode without echo (Ctrl-C still interrupts) and

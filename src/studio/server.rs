@@ -273,14 +273,15 @@ fn failed(f: Fail) -> Reply {
 fn route(rq: &mut Request, studio: &Studio) -> Reply {
     let url = rq.url().to_string();
     let path = url.split('?').next().unwrap_or("");
-    if *rq.method() == Method::Post && header_of(rq, SECRET_HEADER) != Some(studio.secret.as_str())
-    {
-        return Reply::error(
-            403,
-            "refused: the request lacks this studio's secret (its own page sends it)",
-        );
-    }
-    if path.starts_with("/api/machine/") && !has_secret(rq, &url, studio) {
+    // a change needs the secret in its header; a look at the machine
+    // needs it too (in the header, or the query a WebSocket can carry)
+    let post = *rq.method() == Method::Post;
+    let keyed = if post {
+        header_of(rq, SECRET_HEADER) == Some(studio.secret.as_str())
+    } else {
+        has_secret(rq, &url, studio)
+    };
+    if (post || path.starts_with("/api/machine/")) && !keyed {
         return Reply::error(
             403,
             "refused: the request lacks this studio's secret (its own page sends it)",
