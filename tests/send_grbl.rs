@@ -7,6 +7,7 @@ mod common;
 use common::*;
 use relievo::grbl::port::MemPort;
 use relievo::grbl::sender;
+use relievo::grbl::sender::Stall;
 use relievo::grbl::sim::{Faults, SimGrbl};
 use relievo::machine::Machine;
 use relievo::ops::send::SendJob;
@@ -632,9 +633,10 @@ fn a_machine_left_in_check_mode_cuts_the_job() {
 }
 
 /// A controller that goes on answering status polls but neither moves nor
-/// acknowledges is not waited on for ever: past the limit the sender stops
+/// acknowledges is not waited on for ever: past the derived limit (the
+/// planner's time for what it holds, twice, plus 20 s) the sender stops
 /// (feed hold, spindle off) and says where it waited. A long dwell is not
-/// a stall: its own time is allowed for.
+/// a stall: its own time is allowed for; a fixed limit can be given.
 #[test]
 fn a_frozen_controller_is_not_waited_on_for_ever() {
     let d = scratch("send-frozen");
@@ -643,30 +645,38 @@ fn a_frozen_controller_is_not_waited_on_for_ever() {
         freeze_at: Some(120),
         ..Default::default()
     });
-    let e = SendJob {
-        stall_timeout: Some(60.0),
-        ..job(&path)
-    }
-    .run(&mut p, &AtomicBool::new(false))
-    .unwrap_err();
+    let e = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap_err();
     assert!(
-        e.0.contains("GRBL reported Run but neither moved nor acknowledged a line for 6")
-            && e.0.contains("spindle was stopped"),
+        e.0.contains("but acknowledged no line for") && e.0.contains("spindle was stopped"),
         "{e}"
     );
-    assert!(e.0.contains("waiting on job line"), "{e}");
-    // a 90 s dwell within a 60 s limit runs to the end
+    assert!(e.0.contains("waiting on job line 1"), "{e}");
+    let number = |after: &str| -> f64 {
+        let rest = &e.0[e.0.find(after).unwrap() + after.len()..];
+        rest.split(' ').next().unwrap().parse().unwrap()
+    };
+    let (silent, limit) = (number("acknowledged no line for "), number("(limit "));
+    assert!(
+        (20.0..30.0).contains(&limit) && silent > limit && silent < limit + 2.0,
+        "stopped within the derived limit: {e}"
+    );
+    // the spindle is off, and nothing was sent after the frozen line
+    assert_eq!(p.sim.spindle_rpm(), 0.0, "{e}");
+    // a 90 s dwell under the derived limit, and under a fixed 60 s one,
+    // runs to the end
     let dwell = d.join("dwell.nc");
     std::fs::write(&dwell, "G21 G90\nG1 X1 F500\nG4 P90\nG1 X2\nG1 X3\n").unwrap();
-    let mut p = port(Faults::default());
-    SendJob {
-        stall_timeout: Some(60.0),
-        ..job(&dwell)
+    for stall in [None, Some(Stall::Seconds(60.0))] {
+        let mut p = port(Faults::default());
+        SendJob {
+            stall,
+            ..job(&dwell)
+        }
+        .run(&mut p, &AtomicBool::new(false))
+        .unwrap();
+        finish(&mut p);
+        assert_eq!(p.sim.log.len(), 5, "{:?}", p.sim.log);
     }
-    .run(&mut p, &AtomicBool::new(false))
-    .unwrap();
-    finish(&mut p);
-    assert_eq!(p.sim.log.len(), 5, "{:?}", p.sim.log);
     std::fs::remove_dir_all(d).unwrap();
 }
 

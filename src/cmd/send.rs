@@ -45,12 +45,14 @@ pub struct SendArgs {
     /// before `send` stops the spindle and gives up.
     #[arg(long, default_value_t = 600.0, value_name = "SECONDS")]
     pub hold_limit: f64,
-    /// Seconds a controller that answers status polls but neither moves
-    /// nor acknowledges a line (beyond a dwell's own time) is waited on
-    /// before `send` holds, stops the spindle and gives up (told after
-    /// 30 s).
-    #[arg(long, default_value_t = 60.0, value_name = "SECONDS")]
-    pub stall_timeout: f64,
+    /// How long a controller that answers status polls but stands still
+    /// and acknowledges no line is waited on before `send` holds, stops
+    /// the spindle and gives up (told at half of it): `auto`, twice the
+    /// planner's time for the moves GRBL holds ahead of the line it owes
+    /// (at the reported overrides) plus 20 s, or seconds (beyond a dwell's
+    /// own time).
+    #[arg(long, default_value = "auto", value_name = "auto|SECONDS", value_parser = relievo::grbl::sender::Stall::parse)]
+    pub stall_timeout: relievo::grbl::sender::Stall,
     /// At an M0 (a tool change): ask on the terminal, continue at once,
     /// or touch off Z on the touch plate (--plate) and continue.
     #[arg(long, value_enum, default_value = "ask")]
@@ -83,7 +85,7 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         rx_buffer: 128,
         link_timeout: Some(args.link_timeout),
         hold_limit: Some(args.hold_limit),
-        stall_timeout: Some(args.stall_timeout),
+        stall: Some(args.stall_timeout),
         on_pause: args.on_pause,
         plate: args.plate,
         keys: !quiet,
@@ -95,7 +97,13 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
     for (flag, v) in [
         ("--link-timeout", args.link_timeout),
         ("--hold-limit", args.hold_limit),
-        ("--stall-timeout", args.stall_timeout),
+        (
+            "--stall-timeout",
+            match args.stall_timeout {
+                relievo::grbl::sender::Stall::Seconds(s) => s,
+                relievo::grbl::sender::Stall::Derived => 1.0,
+            },
+        ),
     ] {
         if !(v.is_finite() && (0.1..=86400.0).contains(&v)) {
             relievo::bail!("{flag} {v}: give seconds from 0.1 to 86400");

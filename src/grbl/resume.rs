@@ -185,6 +185,15 @@ impl Tracker {
         self.in_planner(self.planner)
     }
 
+    /// The first line that may not have run yet: the oldest in the
+    /// planner, else the one after the last acknowledged.
+    pub fn first_unrun(&self) -> usize {
+        self.queued
+            .front()
+            .copied()
+            .unwrap_or_else(|| self.last_acked.map_or(0, |k| k + 1))
+    }
+
     /// A status report said `free` planner blocks were free.
     pub fn status(&mut self, free: usize) -> Option<usize> {
         self.in_planner(self.planner.saturating_sub(free))

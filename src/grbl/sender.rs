@@ -51,14 +51,9 @@ pub struct Options {
     /// Seconds the machine may stay in Hold (or Door) before the sender
     /// gives up, stops the spindle and says so.
     pub hold_limit: f64,
-    /// Seconds of standing still with nothing acknowledged (beyond a
-    /// dwell's own time) before the sender says so.
-    pub stall_warning: f64,
-    /// Seconds of standing still with nothing acknowledged (beyond a
-    /// dwell's own time) before the sender holds, stops the spindle and
-    /// gives up: a moving machine's position changes at every status
-    /// report, so stillness without an answer is a stalled controller.
-    pub stall_timeout: f64,
+    /// How long a machine that stands still with a line unacknowledged is
+    /// waited on before the sender holds, stops the spindle and gives up.
+    pub stall: Stall,
     /// GRBL's planner blocks (from a status report's `Bf:` when idle).
     pub planner: usize,
     /// When each line should end by the time estimate (for the ETA).
@@ -74,6 +69,50 @@ pub struct Options {
     pub remote: Option<super::remote::Remote>,
 }
 
+/// The watchdog's limit on a stalled controller: one that answers status
+/// polls but neither moves nor acknowledges a line.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Stall {
+    /// The planner's own time for what GRBL holds ahead of the line it
+    /// owes (at the reported overrides), twice over, plus `STALL_MARGIN`:
+    /// a machine still busy with long moves is given their time, a frozen
+    /// one is told within the margin.
+    Derived,
+    /// A fixed number of seconds (beyond a dwell's own time).
+    Seconds(f64),
+}
+
+/// Seconds beyond the planned time (and a dwell's own) before a still,
+/// silent controller is called stalled: longer than any pause GRBL makes
+/// on its own between answered lines.
+pub const STALL_MARGIN: f64 = 20.0;
+
+impl Stall {
+    /// The limit, in seconds since the last acknowledgement, given the
+    /// planned seconds of the moves ahead (None without a time estimate)
+    /// and the dwell of the line owed.
+    pub fn limit(self, planned: Option<f64>, dwell: f64) -> f64 {
+        match self {
+            Stall::Derived => 2.0 * planned.unwrap_or(0.0) + STALL_MARGIN + dwell,
+            Stall::Seconds(s) => s + dwell,
+        }
+    }
+
+    /// `auto`, or seconds.
+    pub fn parse(s: &str) -> std::result::Result<Stall, String> {
+        if s == "auto" {
+            return Ok(Stall::Derived);
+        }
+        match s.parse::<f64>() {
+            Ok(x) if x.is_finite() && x > 0.0 => Ok(Stall::Seconds(x)),
+            _ => Err(format!(
+                "'{s}' is not a stall timeout: 'auto' (the planner's time plus \
+                 {STALL_MARGIN} s) or seconds above 0"
+            )),
+        }
+    }
+}
+
 impl Default for Options {
     fn default() -> Options {
         Options {
@@ -85,8 +124,7 @@ impl Default for Options {
             progress: false,
             link_timeout: 10.0,
             hold_limit: 600.0,
-            stall_warning: 30.0,
-            stall_timeout: 60.0,
+            stall: Stall::Derived,
             planner: super::sim::PLANNER_BLOCKS,
             min_move: MIN_MOVE,
             clock: None,
@@ -120,8 +158,11 @@ pub enum Stop {
     /// The machine neither moved nor acknowledged a line for longer than
     /// the limit, while still answering status polls.
     Stalled {
+        /// Since the last acknowledgement, and the limit it passed.
         seconds: f64,
+        limit: f64,
         state: State,
+        pos: [f64; 3],
         line: Option<usize>,
     },
 }
@@ -145,11 +186,17 @@ impl Stop {
             ),
             Stop::Stalled {
                 seconds,
+                limit,
                 state,
+                pos,
                 line,
             } => format!(
-                "GRBL reported {state} but neither moved nor acknowledged a line for \
-                 {seconds:.0} s{}: streaming stopped and the spindle was stopped",
+                "GRBL reported {state} at X{:.3} Y{:.3} Z{:.3} but acknowledged no line for \
+                 {seconds:.1} s (limit {limit:.1} s){}: streaming stopped and the spindle was \
+                 stopped",
+                pos[0],
+                pos[1],
+                pos[2],
                 line.map_or(String::new(), |l| format!(" (waiting on job line {l})"))
             ),
         }

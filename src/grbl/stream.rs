@@ -10,7 +10,7 @@ use super::lines::JobLine;
 use super::remote::{Remote, Told};
 use super::replies::{parse_status, Replies, Status};
 use super::resume::{highest_z, reentry_at, Journal, Tracker};
-use super::sender::{OnPause, Options, Outcome, Stop};
+use super::sender::{OnPause, Options, Outcome, Stop, STALL_MARGIN};
 use super::session::Realtime;
 use super::state::State;
 use super::touchoff::touch_off;
@@ -88,11 +88,14 @@ struct Watch {
     idle_since: Option<f64>,
     /// Since when the machine holds (not at the job's own pause).
     hold_since: Option<f64>,
-    /// When a line was last acknowledged or the tool last moved, where it
-    /// was, and whether the stall was told.
-    last_sign: f64,
+    /// When a line was last acknowledged, when the tool last moved and
+    /// where it was, and whether the stall was told.
+    last_ack: f64,
+    last_move: f64,
     last_pos: Option<[f64; 3]>,
     told: bool,
+    /// The slower of the feed and rapid overrides, as a fraction.
+    pace: f64,
 }
 
 /// One thing to send: a job line (its index) or a preamble line.
@@ -190,9 +193,11 @@ impl<'a> Stream<'a> {
                 last_poll: f64::MIN,
                 idle_since: None,
                 hold_since: None,
-                last_sign: start,
+                last_ack: start,
+                last_move: start,
                 last_pos: None,
                 told: false,
+                pace: 1.0,
             },
             poll: 1.0 / opts.poll_hz.clamp(0.1, 5.0),
             journal,
@@ -375,7 +380,7 @@ impl<'a> Stream<'a> {
         };
         self.used -= len;
         self.watch.idle_since = None;
-        self.watch.last_sign = self.watch.last_reply;
+        self.watch.last_ack = self.watch.last_reply;
         self.watch.told = false;
         if let Some(code) = error {
             let (line, text) = match self.items[item].job {
@@ -393,9 +398,10 @@ impl<'a> Stream<'a> {
         } else if let Some(k) = self.items[item].job {
             self.out.acked += 1;
             self.progress.set(k + 1, None);
+            let ran = self.tracker.acked(self.lines, k);
             if let Some(j) = self.journal.as_mut() {
                 j.acked(self.lines[k].number)?;
-                if let Some(e) = self.tracker.acked(self.lines, k) {
+                if let Some(e) = ran {
                     j.executed(self.lines[e].number)?;
                 }
             }
@@ -421,10 +427,14 @@ impl<'a> Stream<'a> {
         self.watch.last_reply = r.port.now();
         self.holding = matches!(st.state, State::Hold(_));
         self.progress.set(self.out.acked, Some(st.pos));
-        if let (Some(j), Some((blocks, _))) = (self.journal.as_mut(), st.free) {
-            if let Some(e) = self.tracker.status(blocks) {
+        if let Some((blocks, _)) = st.free {
+            let ran = self.tracker.status(blocks);
+            if let (Some(j), Some(e)) = (self.journal.as_mut(), ran) {
                 j.executed(self.lines[e].number)?;
             }
+        }
+        if let Some([feed, rapid, _]) = st.overrides {
+            self.watch.pace = (feed.min(rapid) as f64 / 100.0).max(0.01);
         }
         // held at the pause's M0 (everything before it answered; GRBL
         // answers the M0 itself when released)
@@ -477,39 +487,68 @@ impl<'a> Stream<'a> {
         Ok(Flow::Go)
     }
 
-    /// Standing still with nothing acknowledged, not held nor dwelling:
-    /// told after the warning's time, stopped past the hold limit.
+    /// Nothing acknowledged for longer than the limit (`Stall`: by
+    /// default the planner's time for what GRBL holds ahead of the line it
+    /// owes, twice over, plus a margin) while the tool stands still, not
+    /// held: told at half the limit, stopped past it.
     fn stalled(&mut self, r: &mut Replies, st: &Status, now: f64) -> Result<Flow> {
         let w = &mut self.watch;
         if w.last_pos != Some(st.pos) {
-            (w.last_pos, w.last_sign, w.told) = (Some(st.pos), now, false);
+            (w.last_pos, w.last_move) = (Some(st.pos), now);
         }
-        let dwell = self.inflight.front().map_or(0.0, |f| self.items[f.0].dwell);
-        let still = now - w.last_sign - dwell;
-        let stalled = !self.inflight.is_empty() && !self.stopping() && !st.state.is_held();
-        if stalled && still > self.opts.stall_warning && !self.watch.told {
-            self.watch.told = true;
+        let Some(&(item, _)) = self.inflight.front() else {
+            return Ok(Flow::Go);
+        };
+        if self.stopping() || st.state.is_held() {
+            return Ok(Flow::Go);
+        }
+        let limit = self
+            .opts
+            .stall
+            .limit(self.planned_ahead(item), self.items[item].dwell);
+        let w = &mut self.watch;
+        let (silent, still) = (now - w.last_ack, now - w.last_move.max(w.last_ack));
+        let standing = still >= (STALL_MARGIN / 2.0).min(limit / 2.0);
+        if standing && silent > limit / 2.0 && !w.told {
+            w.told = true;
             let line = self.waiting_on().unwrap_or(0);
             self.progress.suspend(|| {
                 eprintln!(
-                    "warning: GRBL reports {} at X{:.3} Y{:.3} Z{:.3} but has neither moved nor \
-                     acknowledged a line for {:.0} s (waiting on job line {line}); \
-                     Ctrl-C stops the job",
-                    st.state, st.pos[0], st.pos[1], st.pos[2], still
+                    "warning: GRBL reports {} at X{:.3} Y{:.3} Z{:.3} but has acknowledged no \
+                     line for {silent:.0} s and stands still (waiting on job line {line}; \
+                     stopped at {limit:.0} s); Ctrl-C stops the job",
+                    st.state, st.pos[0], st.pos[1], st.pos[2]
                 )
             });
         }
-        if stalled && still > self.opts.stall_timeout {
+        if standing && silent > limit {
             r.port.write_all(&[FEED_HOLD])?;
             spindle_stop_once_held(r)?;
             self.out.stop = Some(Stop::Stalled {
-                seconds: still,
+                seconds: silent,
+                limit,
                 state: st.state,
+                pos: st.pos,
                 line: self.waiting_on(),
             });
             return Ok(Flow::End);
         }
         Ok(Flow::Go)
+    }
+
+    /// The planner's seconds, at the reported overrides, from the first
+    /// line that may not have run to the end of `item`'s line: what GRBL
+    /// must do before it can answer it. None without a time estimate.
+    fn planned_ahead(&self, item: usize) -> Option<f64> {
+        let k = self.items[item].job?;
+        let clock = self
+            .opts
+            .clock
+            .as_ref()
+            .filter(|c| c.len() == self.lines.len())?;
+        let from = self.tracker.first_unrun().min(k);
+        let before = if from == 0 { 0.0 } else { clock[from - 1] };
+        Some((clock[k] - before).max(0.0) / self.watch.pace)
     }
 
     /// An Idle machine with an empty buffer still owing replies has lost
@@ -568,7 +607,7 @@ impl<'a> Stream<'a> {
         self.phase = Phase::Sending;
         self.watch.hold_since = None;
         self.watch.last_reply = r.port.now();
-        self.watch.last_sign = self.watch.last_reply;
+        self.watch.last_ack = self.watch.last_reply;
         Ok(())
     }
 

@@ -34,8 +34,9 @@ pub struct SendJob {
     pub link_timeout: Option<f64>,
     /// Seconds the machine may stay in Hold (default 600).
     pub hold_limit: Option<f64>,
-    /// Seconds a stalled controller is waited on (default 60).
-    pub stall_timeout: Option<f64>,
+    /// How long a stalled controller is waited on (default: derived from
+    /// the planner's time).
+    pub stall: Option<sender::Stall>,
     /// What to do at an M0.
     pub on_pause: sender::OnPause,
     /// The touch plate, for `OnPause::Probe`.
@@ -68,7 +69,7 @@ impl SendJob {
             progress: self.progress,
             link_timeout: self.link_timeout.unwrap_or(defaults.link_timeout),
             hold_limit: self.hold_limit.unwrap_or(defaults.hold_limit),
-            stall_timeout: self.stall_timeout.unwrap_or(defaults.stall_timeout),
+            stall: self.stall.unwrap_or(defaults.stall),
             on_pause: self.on_pause,
             plate: self.plate,
             keys: self.keys,
@@ -112,7 +113,8 @@ impl SendJob {
             if let Some(m) = sender::min_move(&settings) {
                 opts.min_move = m;
             }
-            if self.progress || self.remote.is_some() {
+            // the ETA's and the watchdog's clock
+            {
                 let text = crate::input::read_text(&self.job, crate::input::MAX_FILE)?;
                 opts.clock = sender::clock(&lines, &text, &settings).map(|c| {
                     let base = if start > 0 { c[start - 1] } else { 0.0 };
