@@ -329,7 +329,7 @@ fn the_machine_panel_s_session_drives_the_firmware() {
 /// (the machine Idle, jogged there), continued to its end.
 #[test]
 fn the_page_drives_the_firmware() {
-    use common::browser::{Browser, Studio};
+    use common::browser::{connect, make_job, run_to_end, Browser, Studio};
     let Some(fw) = firmware("the_page_drives_the_firmware") else {
         return;
     };
@@ -346,47 +346,70 @@ fn the_page_drives_the_firmware() {
         })
     };
     b.goto(&studio.url);
-    b.click("#machine-tab");
-    b.script("document.getElementById('m-port').value = ''");
-    b.keys("#m-port", grbl.tty.to_str().unwrap());
-    b.click("#m-conn");
-    text("#m-state", "Idle", 20, &|t| t == "Idle");
+    // the studio's own job, small enough for the firmware's real time: an
+    // 8 mm relief, roughed with a flat and finished with a ball
+    let summary = make_job(
+        &b,
+        &[
+            ("#width", "8"),
+            ("#depth", "1"),
+            ("#resolution", "48"),
+            ("#stepover", "2"),
+            ("#rough", "flat:3.175"),
+            ("[data-more=cut][data-name=rough_stepover]", "2.5"),
+            ("[data-more=cut][data-name=safe_z]", "2"),
+        ],
+    );
+    assert!(summary.contains("roughing flat:3.175"), "{summary}");
+    connect(&b, &grbl.tty);
     b.script("document.getElementById('m-step').value = '10'");
     b.click("[data-jog='x+']");
     text("#m-mx", "machine X 10", 30, &|t| t == "10.000");
     b.click("[data-zero='x']");
     text("#m-wx", "work X 0", 20, &|t| t == "0.000");
 
-    let job = d.join("change.nc");
-    std::fs::write(&job, TOOL_CHANGE_JOB).unwrap();
-    b.keys("#m-nc", job.to_str().unwrap());
-    text("#m-source", "the file chosen", 20, &|t| {
-        t.contains("(11 lines)")
-    });
     b.click("#m-check");
-    text("#m-jobtext", "the check", 60, &|t| {
-        t.contains("check passed")
+    let checked = text("#m-jobtext", "the check", 120, &|t| {
+        t.contains("check passed") || t.contains("error") || t.contains("stopped")
     });
+    assert!(checked.contains("check passed"), "{checked}");
+    // run, stopped midway (hold, spindle off, reset), unlocked, resumed
+    // from the journal through the tool change to the end
     b.click("#m-run");
-    let pause = text("#m-pausetext", "the tool change", 60, &|t| t.contains("M0"));
-    assert!(pause.contains("fit the 1 mm ball"), "{pause}");
-    text("#m-state", "Idle at the change", 20, &|t| t == "Idle");
+    b.wait("some progress", 120, || {
+        let t = b.text("#m-jobtext");
+        t.split(": ")
+            .nth(1)
+            .and_then(|x| x.split(' ').next())
+            .and_then(|n| n.parse::<usize>().ok())
+            .filter(|&n| n > 40)
+    });
+    b.click("#m-stop");
+    let stopped = text("#m-jobtext", "the stop", 60, &|t| t.contains("stopped"));
+    assert!(stopped.contains("resume"), "{stopped}");
+    b.click("#m-unlock");
+    text("#m-state", "unlocked", 30, &|t| t == "Idle");
+    b.click("#m-resume");
+    let pause = text("#m-pausetext", "the tool change", 180, &|t| {
+        t.contains("M0")
+    });
+    assert!(pause.contains("ball:3.175"), "{pause}");
+    text("#m-state", "Idle at the change", 30, &|t| t == "Idle");
     let z = b.text("#m-wz").parse::<f64>().unwrap();
     b.click("[data-jog='z+']");
     text("#m-wz", "jogged up", 30, &|t| {
         t.parse::<f64>().ok() == Some(z + 10.0)
     });
-    b.click("#m-continue");
-    let done = text("#m-jobtext", "the end", 60, &|t| {
-        t.starts_with("done") || t.contains("error") || t.contains("stopped")
-    });
+    b.shot("#machine-panel")
+        .save(d.join("firmware-change.png"))
+        .unwrap();
+    let done = run_to_end(&b, "the job's end");
     assert!(done.starts_with("done"), "{done}");
-    text("#m-wx", "the job's last X", 30, &|t| t == "3.000");
     b.shot("#machine-panel")
         .save(d.join("firmware-panel.png"))
         .unwrap();
     eprintln!(
-        "the page on the firmware: {done}; {}",
+        "the page on the firmware: {checked}; {stopped}; {done}; {}",
         d.join("firmware-panel.png").display()
     );
     drop(grbl);

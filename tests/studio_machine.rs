@@ -7,7 +7,7 @@
 
 mod common;
 
-use common::browser::{Browser, Studio};
+use common::browser::{connect, make_job, run_to_end, wait_text, work_xy, Browser, Studio};
 use common::scratch;
 use std::io::{Read, Write};
 use std::path::Path;
@@ -74,18 +74,6 @@ fn marker(img: &image::RgbaImage) -> Option<(f64, f64)> {
         }
     }
     (n > 20.0).then(|| (sx / n, sy / n))
-}
-
-fn work_xy(b: &Browser) -> (f64, f64) {
-    let v = |css| b.text(css).parse::<f64>().unwrap();
-    (v("#m-wx"), v("#m-wy"))
-}
-
-fn wait_text(b: &Browser, css: &str, what: &str, f: impl Fn(&str) -> bool) -> String {
-    b.wait(what, 30, || {
-        let t = b.text(css);
-        f(&t).then_some(t)
-    })
 }
 
 #[test]
@@ -155,63 +143,6 @@ fn a_carver_drives_the_machine_from_the_page() {
     wait_text(&b, "#m-state", "disconnected", |t| t == "not connected");
 }
 
-/// The studio's job made on the page: `width` mm wide at `resolution`
-/// px, on `stock` (WxHxT) when given. Returns the job's summary.
-fn make_job(b: &Browser, width: u32, resolution: u32, stock: Option<&str>) -> String {
-    if let Some(stock) = stock {
-        b.script(&format!(
-            "const s = document.querySelector('[data-more=cut][data-name=stock]'); \
-             s.value = '{stock}'; s.dispatchEvent(new Event('input', {{bubbles: true}}));"
-        ));
-    }
-    b.script(&format!(
-        "const w = document.getElementById('width'); w.value = '{width}'; \
-         w.dispatchEvent(new Event('change', {{bubbles: true}})); \
-         const r = document.getElementById('resolution'); r.value = '{resolution}'; \
-         r.dispatchEvent(new Event('change', {{bubbles: true}}));"
-    ));
-    b.click("#tabs button[data-tab=job]");
-    let summary = b.wait("the job", 240, || {
-        let s = b.text("#summary");
-        s.contains("lines").then_some(s)
-    });
-    eprintln!("the job: {summary}");
-    summary
-}
-
-/// The Machine tab connected to the machine at `link`, Idle.
-fn connect(b: &Browser, link: &Path) {
-    b.click("#machine-tab");
-    b.script("document.getElementById('m-port').value = ''");
-    b.keys("#m-port", link.to_str().unwrap());
-    b.click("#m-conn");
-    wait_text(b, "#m-state", "the machine Idle", |t| t == "Idle");
-}
-
-/// The job's end, once the page tells it; a tool change on the way is
-/// continued (the carver has fitted the tool).
-fn run_to_end(b: &Browser, what: &str) -> String {
-    loop {
-        let (t, p) = b.wait(what, 300, || {
-            let t = b.text("#m-jobtext");
-            let p = b.text("#m-pausetext");
-            (t.starts_with("done")
-                || t.contains("stopped")
-                || t.contains("error")
-                || p.contains("M0"))
-            .then_some((t, p))
-        });
-        if p.contains("M0") && !t.starts_with("done") {
-            b.click("#m-continue");
-            b.wait("the change left", 30, || {
-                (!b.text("#m-pausetext").contains("M0")).then_some(())
-            });
-            continue;
-        }
-        return t;
-    }
-}
-
 /// Issue 46's acceptance on the page: the studio's 60 x 40 mm demo job,
 /// made on the page, checked in GRBL's check mode and run through its tool
 /// change (the page says which tool to fit, the carver jogs there and goes
@@ -229,7 +160,14 @@ fn the_page_runs_the_job_through_its_tool_change() {
     let _grbl = GrblSim::with(&link, "100", &["--log", log.to_str().unwrap()]);
     let studio = Studio::start(&[]);
     b.goto(&studio.url);
-    make_job(&b, 60, 256, Some("60x40x8"));
+    make_job(
+        &b,
+        &[
+            ("[data-more=cut][data-name=stock]", "60x40x8"),
+            ("#width", "60"),
+            ("#resolution", "256"),
+        ],
+    );
     let made = std::fs::read_to_string(studio_job(&b)).unwrap();
     assert!(
         made.contains("(stock: 60.00 x 40.00 x 8.00 mm"),
@@ -352,7 +290,7 @@ fn the_page_stops_and_resumes_a_job_from_its_journal() {
     let _grbl = GrblSim::with(&link, "400", &[]);
     let studio = Studio::start(&[]);
     b.goto(&studio.url);
-    make_job(&b, 40, 128, None);
+    make_job(&b, &[("#width", "40"), ("#resolution", "128")]);
     connect(&b, &link);
     b.click("#m-run");
     b.wait("some progress", 60, || {

@@ -257,3 +257,72 @@ pub fn changed(a: &image::RgbaImage, b: &image::RgbaImage, tol: u8) -> f64 {
         .count();
     n as f64 / (a.width() * a.height()) as f64
 }
+
+// ---- the Machine panel ----
+
+/// The studio's job made on the page with `settings` (a control's CSS
+/// selector and its value, each told to the page as a carver's change
+/// is). Returns the job's summary.
+pub fn make_job(b: &Browser, settings: &[(&str, &str)]) -> String {
+    for (css, value) in settings {
+        b.script(&format!(
+            "const e = document.querySelector('{css}'); e.value = '{value}'; \
+             for (const k of ['input', 'change']) \
+               e.dispatchEvent(new Event(k, {{bubbles: true}}));"
+        ));
+    }
+    b.click("#tabs button[data-tab=job]");
+    let summary = b.wait("the job", 240, || {
+        let s = b.text("#summary");
+        s.contains("lines").then_some(s)
+    });
+    eprintln!("the job: {summary}");
+    summary
+}
+
+/// The Machine tab connected to the machine at `link`, Idle.
+pub fn connect(b: &Browser, link: &Path) {
+    b.click("#machine-tab");
+    b.script("document.getElementById('m-port').value = ''");
+    b.keys("#m-port", link.to_str().unwrap());
+    b.click("#m-conn");
+    wait_text(b, "#m-state", "the machine Idle", |t| t == "Idle");
+}
+
+/// The job's end, once the page tells it; a tool change on the way is
+/// continued (the carver has fitted the tool).
+pub fn run_to_end(b: &Browser, what: &str) -> String {
+    loop {
+        let (t, p) = b.wait(what, 300, || {
+            let t = b.text("#m-jobtext");
+            let p = b.text("#m-pausetext");
+            (t.starts_with("done")
+                || t.contains("stopped")
+                || t.contains("error")
+                || p.contains("M0"))
+            .then_some((t, p))
+        });
+        if p.contains("M0") && !t.starts_with("done") {
+            b.click("#m-continue");
+            b.wait("the change left", 30, || {
+                (!b.text("#m-pausetext").contains("M0")).then_some(())
+            });
+            continue;
+        }
+        return t;
+    }
+}
+
+/// The readout's work X and Y.
+pub fn work_xy(b: &Browser) -> (f64, f64) {
+    let v = |css| b.text(css).parse::<f64>().unwrap();
+    (v("#m-wx"), v("#m-wy"))
+}
+
+/// The text of `css` once `f` accepts it (30 s at most).
+pub fn wait_text(b: &Browser, css: &str, what: &str, f: impl Fn(&str) -> bool) -> String {
+    b.wait(what, 30, || {
+        let t = b.text(css);
+        f(&t).then_some(t)
+    })
+}
