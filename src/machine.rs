@@ -54,6 +54,54 @@ pub struct Machine {
     /// The tool table: `--tool T2` finds its spec here.
     #[serde(default)]
     pub tools: std::collections::BTreeMap<String, ToolEntry>,
+    /// A fixed tool-length setter, if the machine has one.
+    #[serde(default)]
+    pub setter: Option<Setter>,
+}
+
+/// A fixed tool-length setter: where it stands, in machine coordinates
+/// (X, Y, and the Z to probe down from, clear of it), from the machine
+/// file.
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+pub struct Setter {
+    pub x: f64,
+    pub y: f64,
+    pub z: f64,
+    /// How far the fast probe may go down from `z`, mm.
+    #[serde(default = "setter_travel")]
+    pub travel: f64,
+    /// Fast probing feed, mm/min.
+    #[serde(default = "setter_feed")]
+    pub feed: f64,
+}
+
+fn setter_travel() -> f64 {
+    50.0
+}
+
+fn setter_feed() -> f64 {
+    200.0
+}
+
+impl Setter {
+    /// `X,Y,Z` (machine coordinates, mm).
+    pub fn parse(s: &str) -> std::result::Result<Setter, String> {
+        let v: Vec<f64> = s
+            .split(',')
+            .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+            .collect::<Option<_>>()
+            .ok_or_else(|| format!("'{s}': expected the setter's machine X,Y,Z in mm"))?;
+        match v[..] {
+            [x, y, z] => Ok(Setter {
+                x,
+                y,
+                z,
+                travel: setter_travel(),
+                feed: setter_feed(),
+            }),
+            _ => Err(format!("'{s}': expected the setter's machine X,Y,Z in mm")),
+        }
+    }
 }
 
 #[derive(Deserialize, Debug, Clone, PartialEq)]

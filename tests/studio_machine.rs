@@ -319,6 +319,101 @@ fn the_page_stops_and_resumes_a_job_from_its_journal() {
     assert!(done.starts_with("done"), "{done}");
 }
 
+/// A short job with a tool change (11 lines, ending at work X3 Y1 Z5).
+const TOOL_CHANGE_JOB: &str = "G21 G90 G94\nG0 Z2\nG1 X2 Y1 F600\nG0 Z5\nM5\n\
+    M0 (tool: ball:1 for the details)\nG0 X1 Y1\nG1 Z0 F300\nG1 X3 F600\nG0 Z5\nM2\n";
+
+/// The work offset along Z as the readout shows it: machine Z less work Z.
+fn wco_z(b: &Browser) -> f64 {
+    let v = |css| b.text(css).parse::<f64>().unwrap();
+    v("#m-mz") - v("#m-wz")
+}
+
+/// The console's newest line that contains `what`, once there.
+fn console_note(b: &Browser, what: &str, want: &str) -> String {
+    let t = b.wait(what, 60, || {
+        let t = b.text("#m-console");
+        t.contains(want).then_some(t)
+    });
+    t.lines()
+        .rfind(|l| l.contains(want))
+        .unwrap_or_default()
+        .to_string()
+}
+
+/// Probing from the page on `relievo grbl-sim`, which models a touch
+/// plate (10 mm at machine X40 Y40) and tools of 0 and 3.2 mm: the touch
+/// plate sets work Z0; the tool setter (the same block, as a setter at
+/// machine X40 Y40, probed from Z20) measures the tool that set it; at a
+/// job's tool change the carver fits the longer tool, the page measures
+/// it and moves work Z0 by its 3.2 mm, and the job goes on to its end.
+#[test]
+fn the_page_probes_and_measures_a_new_tool_on_the_setter() {
+    let d = scratch("studio-machine-setter");
+    let Some(b) = Browser::start(&d) else {
+        return;
+    };
+    let link = d.join("grbl");
+    let grbl = GrblSim::with(
+        &link,
+        "20",
+        &["--plate", "10@40,40", "--tool-lengths", "0,3.2"],
+    );
+    let studio = Studio::start(&[]);
+    b.goto(&studio.url);
+    connect(&b, &link);
+    b.keys("#m-line", "G0 X40 Y40 Z20\n");
+    wait_text(&b, "#m-mz", "over the plate", |t| t == "20.000");
+    // the plate: work Z0 where the tip would meet the plate's bottom
+    b.script("document.getElementById('m-plate').value = '10'");
+    b.click("#m-probe-go");
+    let said = console_note(&b, "the touch-off", "touch-off:");
+    assert!(!said.contains("error") && !said.contains("ALARM"), "{said}");
+    b.wait("work Z0 on the plate's base", 30, || {
+        (wco_z(&b).abs() < 0.002).then_some(())
+    });
+    // the setter: the tool that set Z0 reads the setter's top at Z10
+    b.keys("#m-setter", "40,40,20");
+    b.click("#m-setter-ref");
+    let said = console_note(&b, "the reference", "tool setter:");
+    assert!(said.contains("work Z10.000"), "{said}");
+
+    let job = d.join("change.nc");
+    std::fs::write(&job, TOOL_CHANGE_JOB).unwrap();
+    b.keys("#m-nc", job.to_str().unwrap());
+    wait_text(&b, "#m-source", "the file chosen", |t| {
+        t.contains("(11 lines)")
+    });
+    b.click("#m-run");
+    let pause = b.wait("the tool change", 60, || {
+        let t = b.text("#m-pausetext");
+        t.contains("M0").then_some(t)
+    });
+    assert!(pause.contains("ball:1"), "{pause}");
+    let table = b.text("#m-pausetool");
+    assert!(
+        table.contains("ball:1 is not in") || table.contains("tool table"),
+        "{table}"
+    );
+    wait_text(&b, "#m-state", "Idle at the change", |t| t == "Idle");
+    // the carver fits the 3.2 mm longer tool (the simulator's hand)
+    let before = wco_z(&b);
+    // SAFETY: kill(2) on the simulator's own process id
+    assert_eq!(unsafe { libc::kill(grbl.0.id() as i32, libc::SIGUSR1) }, 0);
+    b.click("#m-setter-new");
+    let said = console_note(&b, "the new tool measured", "tool setter: the new tool");
+    assert!(said.contains("3.200 mm longer"), "{said}");
+    b.wait("work Z0 moved by the new tool's length", 30, || {
+        ((wco_z(&b) - before - 3.2).abs() < 0.002).then_some(())
+    });
+    b.shot("#machine-panel").save(d.join("setter.png")).unwrap();
+    let done = run_to_end(&b, "the job's end");
+    assert!(done.starts_with("done"), "{done}");
+    // the new tool's tip ends where the job says: work Z5 over the base
+    wait_text(&b, "#m-wz", "the job's last Z", |t| t == "5.000");
+    assert!((wco_z(&b) - 3.2).abs() < 0.002, "{}", wco_z(&b));
+}
+
 /// The job the studio made, as the page downloads it.
 fn studio_job(b: &Browser) -> std::path::PathBuf {
     b.click("#dl-nc");

@@ -48,9 +48,10 @@ pub struct GrblSimArgs {
     /// (machine X, Y; 50 mm square), mm.
     #[arg(long, value_name = "THICKNESS[@X,Y]", value_parser = relievo::grbl::sim::Plate::parse)]
     pub plate: Option<relievo::grbl::sim::Plate>,
-    /// Each tool's length in turn (the next one goes in at each M0), mm:
-    /// a job that does not touch off again after a change cuts that much
-    /// off.
+    /// Each tool's length in turn (the next one goes in at each M0, or
+    /// when the process gets SIGUSR1: the operator's hand at a change the
+    /// machine does not see), mm: a job that does not touch off again
+    /// after a change cuts that much off.
     #[arg(long, value_name = "L1,L2,...", value_delimiter = ',')]
     pub tool_lengths: Vec<f64>,
     /// Also reach the machine at this path (a symbolic link to its
@@ -121,11 +122,15 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
     let mut logged = 0;
     serialport::SerialPort::set_timeout(&mut master, std::time::Duration::from_millis(2))
         .map_err(|e| relievo::Error(format!("grbl-sim: {e}")))?;
+    fitted::watch();
     let start = std::time::Instant::now();
     let mut buf = [0u8; 1024];
     // whether the host has the port open
     let mut open = false;
     loop {
+        if fitted::take() {
+            sim.fit_next_tool();
+        }
         let n = match master.read(&mut buf) {
             Ok(n) => n,
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => 0,
@@ -217,4 +222,26 @@ fn poll_open(master: &serialport::TTYPort) -> bool {
     // SAFETY: one valid pollfd, no timeout
     let r = unsafe { libc::poll(&mut p, 1, 0) };
     r >= 0 && p.revents & libc::POLLHUP == 0
+}
+
+/// SIGUSR1: the operator fitted the next tool.
+mod fitted {
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    static FITTED: AtomicBool = AtomicBool::new(false);
+
+    extern "C" fn on_signal(_: libc::c_int) {
+        FITTED.store(true, Ordering::SeqCst);
+    }
+
+    pub fn watch() {
+        // SAFETY: the handler only stores to an atomic
+        unsafe {
+            libc::signal(libc::SIGUSR1, on_signal as *const () as libc::sighandler_t);
+        }
+    }
+
+    pub fn take() -> bool {
+        FITTED.swap(false, Ordering::SeqCst)
+    }
 }

@@ -12,7 +12,7 @@ pub mod session;
 pub mod sim;
 pub mod state;
 mod stream;
-mod touchoff;
+pub mod touchoff;
 
 /// GRBL 1.1's meaning of `error:N`.
 pub fn error_meaning(n: u32) -> &'static str {

@@ -8,6 +8,7 @@
 
 use super::replies::{parse_status, Replies};
 use super::state::State;
+use super::touchoff::Routine;
 use crate::bail;
 use crate::error::Result;
 use std::collections::VecDeque;
@@ -26,6 +27,8 @@ pub enum Told<'a> {
         elapsed: f64,
         left: Option<f64>,
     },
+    /// A note of the sender's own for the console (a routine's outcome).
+    Said(&'a str),
     /// Held at a pause (M0) until told to go on: the line and its note
     /// (which tool to fit); None once it goes on.
     Paused(Option<String>),
@@ -33,11 +36,18 @@ pub enum Told<'a> {
 
 type Listener = dyn Fn(Told) + Send + Sync;
 
+/// What the page asks of the machine, in turn: outside a job, or of a
+/// job held at a tool change.
+pub enum Step {
+    Line(String),
+    Routine(Routine),
+}
+
 /// Shared between the sender's thread and the watcher's.
 #[derive(Clone)]
 pub struct Remote {
     bytes: Arc<Mutex<VecDeque<u8>>>,
-    lines: Arc<Mutex<VecDeque<String>>>,
+    steps: Arc<Mutex<VecDeque<Step>>>,
     go_on: Arc<AtomicBool>,
     pub stop: Arc<AtomicBool>,
     listener: Arc<Listener>,
@@ -53,7 +63,7 @@ impl Remote {
     pub fn new(listener: impl Fn(Told) + Send + Sync + 'static) -> Remote {
         Remote {
             bytes: Arc::default(),
-            lines: Arc::default(),
+            steps: Arc::default(),
             go_on: Arc::default(),
             stop: Arc::default(),
             listener: Arc::new(listener),
@@ -88,13 +98,19 @@ impl Remote {
         (self.listener)(t)
     }
 
-    fn queue(&self) -> std::sync::MutexGuard<'_, VecDeque<String>> {
-        self.lines.lock().unwrap_or_else(|e| e.into_inner())
+    fn queue(&self) -> std::sync::MutexGuard<'_, VecDeque<Step>> {
+        self.steps.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     /// A line from the page for a job held at a tool change.
     pub fn push_line(&self, l: &str) {
-        self.queue().push_back(l.to_string());
+        self.queue().push_back(Step::Line(l.to_string()));
+    }
+
+    /// A touch-off or a tool setter's measure for a job held at a tool
+    /// change.
+    pub fn push_routine(&self, r: Routine) {
+        self.queue().push_back(Step::Routine(r));
     }
 
     /// Held before a pause line `what` with the machine Idle: the page's
@@ -122,9 +138,17 @@ impl Remote {
                 r.port.write_all(&bytes)?;
             }
             if !awaiting {
-                if let Some(l) = self.queue().pop_front() {
-                    r.port.write_all(format!("{l}\n").as_bytes())?;
-                    awaiting = true;
+                let step = self.queue().pop_front();
+                match step {
+                    Some(Step::Line(l)) => {
+                        r.port.write_all(format!("{l}\n").as_bytes())?;
+                        awaiting = true;
+                    }
+                    Some(Step::Routine(routine)) => {
+                        let said = routine.run(r).unwrap_or_else(|e| e.0);
+                        self.tell(Told::Said(&said));
+                    }
+                    None => {}
                 }
             }
             if r.port.now() - last_poll >= poll {

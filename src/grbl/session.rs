@@ -7,9 +7,10 @@
 //! panel is a view of it; connecting sends nothing but `?`.
 
 use super::port::Port;
-use super::remote::{Remote, Told};
+use super::remote::{Remote, Step, Told};
 use super::replies::{parse_status, Replies};
 use super::state::State;
+use super::touchoff::Routine;
 use super::{alarm_meaning, error_meaning, STATUS};
 use crate::error::Result;
 use crate::gcode::emit::num;
@@ -287,6 +288,9 @@ pub enum Ask {
     /// A line (G-code or `$` command), sent when the one before is
     /// answered.
     Line(String),
+    /// A touch-off or a setter's measure, run when the line before is
+    /// answered.
+    Routine(Routine),
     /// Lend the port to a job's sender; the session waits meanwhile.
     Lend(Lent),
     Close,
@@ -407,6 +411,26 @@ impl Session {
             .map_err(|_| "not connected".to_string())
     }
 
+    /// A touch-off or a setter's measure, after the lines before it (or,
+    /// a job held at its tool change, passed to its sender).
+    pub fn routine(&self, routine: Routine) -> std::result::Result<(), String> {
+        let r = self.shared.now();
+        if !r.connected {
+            return Err("not connected".into());
+        }
+        if let Some(j) = r.job.as_ref().filter(|j| j.running) {
+            if j.paused.is_none() {
+                return Err("a job is running: probing waits for its tool change".into());
+            }
+            self.remote.push_routine(routine);
+            return Ok(());
+        }
+        self.shared.update(|r| r.pending += 1);
+        self.asks
+            .send(Ask::Routine(routine))
+            .map_err(|_| "not connected".to_string())
+    }
+
     /// A realtime byte, at once (during a job too: hold, start,
     /// overrides).
     pub fn realtime(&self, rt: Realtime) -> std::result::Result<(), String> {
@@ -510,6 +534,7 @@ fn job_remote(shared: Arc<Shared>) -> Remote {
                 });
             }
         }
+        Told::Said(t) => shared.update(|s| s.say("note", t, None)),
         Told::Paused(p) => shared.update(|s| {
             if let Some(j) = s.job.as_mut() {
                 j.paused = p;
@@ -531,7 +556,7 @@ impl Drop for Session {
 struct Link<'a> {
     shared: &'a Shared,
     remote: Remote,
-    queue: VecDeque<String>,
+    queue: VecDeque<Step>,
     /// The operator line GRBL has and has not answered.
     awaiting: Option<String>,
     last_poll: f64,
@@ -557,7 +582,8 @@ impl<'a> Link<'a> {
             while let Ok(ask) = asks.try_recv() {
                 match ask {
                     Ask::Close => return Ok(()),
-                    Ask::Line(l) => self.queue.push_back(l),
+                    Ask::Line(l) => self.queue.push_back(Step::Line(l)),
+                    Ask::Routine(routine) => self.queue.push_back(Step::Routine(routine)),
                     Ask::Lend(work) => {
                         work(&mut *r.port);
                         self.last_heard = r.port.now();
@@ -569,10 +595,21 @@ impl<'a> Link<'a> {
                 r.port.write_all(&bytes)?;
             }
             if self.awaiting.is_none() {
-                if let Some(l) = self.queue.pop_front() {
-                    r.port.write_all(format!("{l}\n").as_bytes())?;
-                    self.shared.update(|s| s.say("sent", &l, None));
-                    self.awaiting = Some(l);
+                match self.queue.pop_front() {
+                    Some(Step::Line(l)) => {
+                        r.port.write_all(format!("{l}\n").as_bytes())?;
+                        self.shared.update(|s| s.say("sent", &l, None));
+                        self.awaiting = Some(l);
+                    }
+                    Some(Step::Routine(routine)) => {
+                        let said = routine.run(&mut r);
+                        self.shared.update(|s| match &said {
+                            Ok(t) => s.say("note", t, None),
+                            Err(e) => s.say("note", &e.0, None),
+                        });
+                        self.last_heard = r.port.now();
+                    }
+                    None => {}
                 }
             }
             let now = r.port.now();

@@ -1,10 +1,14 @@
-//! A Z touch-off on a touch plate, outside a job or at its pause.
+//! Setting Z from a touch: a touch plate on the work (outside a job or
+//! at its pause), or a fixed tool-length setter (a tool's length measured
+//! before and after a change, the difference applied to the work zero).
 
 use super::replies::Replies;
 use crate::bail;
 use crate::error::Result;
 use crate::gcode::modal::Modal;
+pub use crate::machine::Setter;
 use glam::DVec3;
+use std::sync::{Arc, Mutex};
 
 /// A Z touch-off on a touch plate: G38.2 down fast, back off, again
 /// slowly, then the work Z set from the trigger point so that the plate's
@@ -92,6 +96,43 @@ fn report_triple(lines: &[String], name: &str) -> Option<DVec3> {
     (v.len() == 3).then(|| DVec3::new(v[0], v[1], v[2]))
 }
 
+/// Probe down `travel` mm at `feed`, back off, probe again slowly: the
+/// slow probe's trigger point, machine coordinates.
+fn touch(r: &mut Replies, travel: f64, feed: f64) -> Result<DVec3> {
+    let n = crate::gcode::emit::num;
+    let probe_time = 60.0 * travel / feed + 30.0;
+    exchange(
+        r,
+        &format!("G91G38.2Z-{}F{}", n(travel), n(feed)),
+        probe_time,
+    )?;
+    exchange(r, "G91G0Z1", 30.0)?;
+    let got = exchange(r, &format!("G91G38.2Z-2F{}", n(SLOW_PROBE)), 60.0)?;
+    report_triple(&got, "PRB")
+        .ok_or_else(|| crate::Error("touch-off: no [PRB:] report after G38.2".into()))
+}
+
+/// What lies between machine Z and work Z besides the active system's
+/// offset: the G92 offset and the tool length offset (from `$#`); and the
+/// active system's own Z offset (from `$G` and `$#`).
+fn offsets(r: &mut Replies) -> Result<(f64, f64)> {
+    let params = exchange(r, "$#", 5.0)?;
+    let g92 = report_triple(&params, "G92").unwrap_or(DVec3::ZERO);
+    let tlo = params
+        .iter()
+        .find_map(|l| l.strip_prefix("[TLO:"))
+        .and_then(|v| v.trim_end_matches(']').parse::<f64>().ok())
+        .unwrap_or(0.0);
+    let modes = exchange(r, "$G", 5.0)?;
+    let wcs = modes
+        .iter()
+        .find_map(|l| l.strip_prefix("[GC:"))
+        .and_then(|m| m.split(' ').find(|w| w.starts_with("G5") && w.len() == 3))
+        .unwrap_or("G54");
+    let active = report_triple(&params, wcs).unwrap_or(DVec3::ZERO);
+    Ok((g92.z + tlo, active.z))
+}
+
 /// A Z touch-off, the machine idle: over the plate (rising over it
 /// first), probe down fast, back off, probe slowly, set the active
 /// system's Z from the slow probe's trigger point (G10 L2, net of G92 and
@@ -101,7 +142,6 @@ fn report_triple(lines: &[String], name: &str) -> Option<DVec3> {
 pub fn touch_off(r: &mut Replies, t: &TouchOff, job: Option<&Modal>) -> Result<()> {
     let n = crate::gcode::emit::num;
     let work = job.map(|m| m.pos - m.wco());
-    let probe_time = 60.0 * t.travel / t.feed + 30.0;
     exchange(r, "G21", 5.0)?;
     if let Some((x, y)) = t.at {
         exchange(
@@ -111,24 +151,10 @@ pub fn touch_off(r: &mut Replies, t: &TouchOff, job: Option<&Modal>) -> Result<(
         )?;
         exchange(r, &format!("G90G0X{}Y{}", n(x), n(y)), 120.0)?;
     }
-    exchange(
-        r,
-        &format!("G91G38.2Z-{}F{}", n(t.travel), n(t.feed)),
-        probe_time,
-    )?;
-    exchange(r, "G91G0Z1", 30.0)?;
-    let got = exchange(r, &format!("G91G38.2Z-2F{}", n(SLOW_PROBE)), 60.0)?;
-    let prb = report_triple(&got, "PRB")
-        .ok_or_else(|| crate::Error("touch-off: no [PRB:] report after G38.2".into()))?;
-    let params = exchange(r, "$#", 5.0)?;
-    let g92 = report_triple(&params, "G92").unwrap_or(DVec3::ZERO);
-    let tlo = params
-        .iter()
-        .find_map(|l| l.strip_prefix("[TLO:"))
-        .and_then(|v| v.trim_end_matches(']').parse::<f64>().ok())
-        .unwrap_or(0.0);
+    let prb = touch(r, t.travel, t.feed)?;
+    let (between, _) = offsets(r)?;
     // work Z at the trigger = the plate's thickness
-    let wcs_z = prb.z - g92.z - tlo - t.thickness;
+    let wcs_z = prb.z - between - t.thickness;
     exchange(r, &format!("G10L2P0Z{}", n(wcs_z)), 5.0)?;
     let clear = work.map_or(0.0, |w| w.z).max(t.thickness + 5.0);
     exchange(r, &format!("G90G0Z{}", n(clear)), 60.0)?;
@@ -147,4 +173,75 @@ pub fn touch_off(r: &mut Replies, t: &TouchOff, job: Option<&Modal>) -> Result<(
         exchange(r, "G91", 5.0)?;
     }
     Ok(())
+}
+
+/// Up to the setter's Z, over it, touch it; back up. Returns the
+/// trigger point's work Z (the setter's top as this tool and the
+/// present work zero see it), the machine back at the setter's Z.
+fn measure(r: &mut Replies, s: &Setter) -> Result<f64> {
+    let n = crate::gcode::emit::num;
+    exchange(r, "G21", 5.0)?;
+    exchange(r, &format!("G53G0Z{}", n(s.z)), 60.0)?;
+    exchange(r, &format!("G53G0X{}Y{}", n(s.x), n(s.y)), 120.0)?;
+    let prb = touch(r, s.travel, s.feed)?;
+    exchange(r, &format!("G53G0Z{}", n(s.z)), 60.0)?;
+    let (between, wcs_z) = offsets(r)?;
+    Ok(prb.z - between - wcs_z)
+}
+
+/// Something done with the port between lines, on the machine's behalf:
+/// outside a job, or at a job's tool change (the sender's re-entry then
+/// puts the machine back where the job was).
+#[derive(Clone, Debug)]
+pub enum Routine {
+    /// Touch off Z on the plate.
+    Plate(TouchOff),
+    /// Measure the tool in the spindle on the setter as the reference
+    /// (the setter's top in work Z), kept in `top`.
+    SetterReference(Setter, Arc<Mutex<Option<f64>>>),
+    /// Measure the new tool on the setter and shift the work zero by the
+    /// difference from the reference, so the new tool's tip reads the
+    /// same work Z the old one did.
+    SetterApply(Setter, Arc<Mutex<Option<f64>>>),
+}
+
+impl Routine {
+    /// Run it; returns what to tell the carver.
+    pub fn run(&self, r: &mut Replies) -> Result<String> {
+        let n = crate::gcode::emit::num;
+        match self {
+            Routine::Plate(t) => {
+                touch_off(r, t, None)?;
+                Ok(format!(
+                    "touch-off: work Z set so the plate's top reads {:.3}",
+                    t.thickness
+                ))
+            }
+            Routine::SetterReference(s, top) => {
+                let z = measure(r, s)?;
+                *top.lock().unwrap_or_else(|e| e.into_inner()) = Some(z);
+                Ok(format!(
+                    "tool setter: this tool reads the setter's top at work Z{z:.3} (the reference)"
+                ))
+            }
+            Routine::SetterApply(s, top) => {
+                let Some(reference) = *top.lock().unwrap_or_else(|e| e.into_inner()) else {
+                    bail!(
+                        "tool setter: no reference yet: measure the tool that set Z0 before \
+                         changing it"
+                    );
+                };
+                let z = measure(r, s)?;
+                let (_, wcs_z) = offsets(r)?;
+                let shift = z - reference;
+                exchange(r, &format!("G10L2P0Z{}", n(wcs_z + shift)), 5.0)?;
+                Ok(format!(
+                    "tool setter: the new tool is {:.3} mm {} than the one that set Z0; work Z0 \
+                     moved with it",
+                    shift.abs(),
+                    if shift >= 0.0 { "longer" } else { "shorter" }
+                ))
+            }
+        }
+    }
 }

@@ -8,6 +8,7 @@ use super::server::Reply;
 use super::work::Studio;
 use crate::grbl::port::SerialLink;
 use crate::grbl::session::{self, JobRun, Realtime, Session};
+use crate::grbl::touchoff::{Routine, Setter, TouchOff};
 use crate::ops::send::SendJob;
 use serde_json::{json, Value};
 use std::path::PathBuf;
@@ -22,6 +23,9 @@ pub struct Slot {
     /// Where the file is kept, and its name as the carver knows it.
     uploaded: Mutex<Option<(PathBuf, String)>>,
     uploads: std::sync::atomic::AtomicUsize,
+    /// The tool setter's reference: its top in work Z as the tool that set
+    /// Z0 reads it (kept across connections: the machine keeps its zero).
+    setter_top: Arc<Mutex<Option<f64>>>,
 }
 
 impl Slot {
@@ -82,6 +86,10 @@ pub struct Call {
     axes: String,
     /// probe: the touch plate's thickness, mm.
     thickness: Option<f64>,
+    /// setter: where the tool setter stands, machine "X,Y,Z" mm.
+    setter: String,
+    /// setter: "reference" (the tool that set Z0) or "apply" (a new tool).
+    step: String,
     /// frame: safe Z, mm above work zero.
     safe_z: Option<f64>,
     /// run: in GRBL's check mode only (nothing moves).
@@ -138,6 +146,7 @@ pub fn post(studio: &Studio, what: &str, call: Call) -> Reply {
         "home" => s.line("$H"),
         "unlock" => s.line("$X"),
         "probe" => probe(&s, &call),
+        "setter" => setter(studio, &s, &call),
         "frame" => frame(studio, &s, &call),
         "run" => run(studio, &s, &call),
         "stop" => {
@@ -174,8 +183,9 @@ fn connect(studio: &Studio, call: &Call) -> Reply {
     }
 }
 
-/// A Z touch-off on a plate under the tool: G38.2 down to the plate,
-/// work Z set to its thickness there, back up 5 mm.
+/// A Z touch-off on a plate under the tool (`grbl::touchoff`: fast
+/// probe, back off, slow probe, work Z from the trigger point); at a
+/// job's tool change, through its sender.
 fn probe(s: &Session, call: &Call) -> Result<(), String> {
     let t = call.thickness.unwrap_or(0.0);
     if !(t.is_finite() && (0.0..100.0).contains(&t)) {
@@ -185,16 +195,24 @@ fn probe(s: &Session, call: &Call) -> Result<(), String> {
     if !(feed.is_finite() && feed > 0.0) {
         return Err(format!("probe feed {feed}: must be positive, mm/min"));
     }
-    let n = crate::gcode::emit::num;
-    for l in [
-        format!("G38.2G91Z-50F{}", n(feed)),
-        format!("G10L20P0Z{}", n(t)),
-        "G91G0Z5".into(),
-        "G90".into(),
-    ] {
-        s.line(&l)?;
-    }
-    Ok(())
+    s.routine(Routine::Plate(TouchOff {
+        thickness: t,
+        at: None,
+        feed,
+        travel: 50.0,
+    }))
+}
+
+/// The tool setter: measure the tool that set Z0 (the reference), or a
+/// new tool, whose difference moves work Z0.
+fn setter(studio: &Studio, s: &Session, call: &Call) -> Result<(), String> {
+    let at = Setter::parse(call.setter.trim()).map_err(|e| format!("tool setter: {e}"))?;
+    let top = studio.machine.setter_top.clone();
+    s.routine(match call.step.as_str() {
+        "reference" => Routine::SetterReference(at, top),
+        "apply" => Routine::SetterApply(at, top),
+        other => return Err(format!("tool setter: '{other}': reference or apply?")),
+    })
 }
 
 /// Run (or check) the job the studio made with `relievo send`'s own

@@ -37,8 +37,11 @@ pub fn options() -> Value {
                 .iter()
                 .map(|(id, t)| json!({"id": id, "tool": t.tool, "name": t.name}))
                 .collect();
-            Some(json!({"id": n, "name": m.name, "tools": tools,
-                        "travel": [m.travel.x, m.travel.y, m.travel.z]}))
+            let setter = m.setter.map(|s| [s.x, s.y, s.z]);
+            Some(
+                json!({"id": n, "name": m.name, "tools": tools, "setter": setter,
+                        "travel": [m.travel.x, m.travel.y, m.travel.z]}),
+            )
         })
         .collect();
     let materials: Vec<Value> = crate::materials::builtin()

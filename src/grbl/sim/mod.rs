@@ -200,6 +200,14 @@ impl SimGrbl {
         s
     }
 
+    /// The operator fitted the next tool (a change the machine does not
+    /// see, as at a tool change the page steers).
+    pub fn fit_next_tool(&mut self) {
+        if self.tool + 1 < self.tool_lengths.len() {
+            self.tool += 1;
+        }
+    }
+
     /// The spindle's speed now (0 = stopped).
     pub fn spindle_rpm(&self) -> f64 {
         self.spindle
@@ -305,9 +313,7 @@ impl SimGrbl {
                 }
                 if let Some(line) = self.paused.take() {
                     // the operator changed the tool while it held
-                    if self.tool + 1 < self.tool_lengths.len() {
-                        self.tool += 1;
-                    }
+                    self.fit_next_tool();
                     self.log.push(line);
                     self.say("ok");
                     self.pump();

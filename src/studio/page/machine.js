@@ -94,7 +94,28 @@ function showJob(j) {
   }
   $('m-pause').hidden = !j.paused;
   $('m-pausetext').textContent = j.paused || '';
+  $('m-pausetool').textContent = j.paused ? inTable(j.paused) : '';
   $('m-resume').hidden = !(j.resumable && !running);
+}
+
+/// The tool a pause names (its `tool: SPEC` note), as the machine's tool
+/// table lists it.
+function inTable(paused) {
+  const spec = (paused.match(/tool: ([^ )\]]+)/) || [])[1];
+  const m = machineNow();
+  const t = spec && m && m.tools.find((x) => x.tool === spec);
+  return t ? `${t.id} in ${m.name}'s tool table: ${t.name}` : (spec ? `${spec} is not in the machine's tool table` : '');
+}
+
+/// The machine chosen in the cutting settings, as the studio describes it.
+function machineNow() {
+  return S.options && S.options.machines.find((x) => x.id === $('machine').value);
+}
+
+/// The tool setter's place from the machine file, unless one is typed.
+function setterFromMachine() {
+  const m = machineNow();
+  if (m && m.setter && !$('m-setter').dataset.typed) $('m-setter').value = m.setter.join(',');
 }
 
 /// The job from above (its cutting moves over the stock) with the tool's
@@ -195,6 +216,12 @@ function machineInit() {
   });
   $('m-probe-go').addEventListener('click', () => machineCall('probe', { thickness: parseFloat($('m-plate').value) || 0 }));
   $('m-frame').addEventListener('click', () => machineCall('frame', {}));
+  $('m-setter').addEventListener('input', () => { $('m-setter').dataset.typed = '1'; });
+  $('machine').addEventListener('change', setterFromMachine);
+  $('machine-tab').addEventListener('click', setterFromMachine);
+  const setter = (step) => machineCall('setter', { step, setter: $('m-setter').value });
+  $('m-setter-ref').addEventListener('click', () => setter('reference'));
+  $('m-setter-new').addEventListener('click', () => setter('apply'));
   const uploaded = () => $('m-source').value === 'upload';
   $('m-run').addEventListener('click', () => machineCall('run', { uploaded: uploaded() }));
   $('m-check').addEventListener('click', () => machineCall('run', { check: true, uploaded: uploaded() }));
