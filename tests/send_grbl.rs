@@ -764,18 +764,18 @@ fn a_tool_change_touches_off_on_the_plate() {
     let job_cut = d.join("job-cut.png");
     let job_report = simulate_report(&path, &relief, &job_cut, &["--machine", "shapeoko"]);
     let (w, h, job_z, _) = relief_mm(&job_cut);
-    for probe in [true, false] {
+    use sender::OnPause;
+    for on_pause in [OnPause::Probe, OnPause::Setter, OnPause::Continue] {
+        let probe = on_pause != OnPause::Continue;
         let mut sim = SimGrbl::new(&Machine::load("shapeoko").unwrap());
         sim.plate = Some(Plate::parse(&plate).unwrap());
         sim.tool_lengths = vec![0.0, 7.3];
         let mut p = MemPort::new(sim, BAUD);
         let go = SendJob {
-            on_pause: if probe {
-                sender::OnPause::Probe
-            } else {
-                sender::OnPause::Continue
-            },
+            on_pause,
             plate: Some(sender::TouchOff::parse(&plate).unwrap()),
+            // the same block as a tool setter, probed from Z40
+            setter: Some(sender::Setter::parse(&format!("{},{},40", at[0], at[1])).unwrap()),
             ..job(&path)
         };
         if let Err(e) = go.run(&mut p, &AtomicBool::new(false)) {
@@ -792,7 +792,17 @@ fn a_tool_change_touches_off_on_the_plate() {
         // every job line once, in order; the touch-off's own lines right
         // after the M0
         let m0 = want.iter().position(|l| l == "M0").unwrap();
-        let log = &p.sim.log;
+        // (the setter's reference, measured before the job, comes first)
+        let lead = (0..p.sim.log.len())
+            .find(|&k| p.sim.log[k..].starts_with(&want[..5]))
+            .unwrap();
+        assert_eq!(
+            lead > 0,
+            on_pause == OnPause::Setter,
+            "{:?}",
+            &p.sim.log[..lead]
+        );
+        let log = &p.sim.log[lead..];
         let extra = log.len() - want.len();
         assert_eq!(log[..=m0], want[..=m0]);
         assert_eq!(log[m0 + 1 + extra..], want[m0 + 1..]);
@@ -831,7 +841,7 @@ fn a_tool_change_touches_off_on_the_plate() {
             .map(|s| s.b.z)
             .fold(f64::INFINITY, f64::min);
         eprintln!(
-            "probe {probe}: {} extra lines; the tip's cut differs from the job's by up to \
+            "{on_pause:?}: {} extra lines; the tip's cut differs from the job's by up to \
              {worst:.5} mm; gouge {gouge:.4} mm (the job alone: {:.4}); the finish's deepest \
              tip Z {finish_low:.4} against the job's {job_low:.4}",
             extra,

@@ -54,13 +54,18 @@ pub struct SendArgs {
     #[arg(long, default_value = "auto", value_name = "auto|SECONDS", value_parser = relievo::grbl::sender::Stall::parse)]
     pub stall_timeout: relievo::grbl::sender::Stall,
     /// At an M0 (a tool change): ask on the terminal, continue at once,
-    /// or touch off Z on the touch plate (--plate) and continue.
+    /// touch off Z on the touch plate (--plate), or measure the new tool
+    /// on the tool setter (--setter), and continue.
     #[arg(long, value_enum, default_value = "ask")]
     pub on_pause: relievo::grbl::sender::OnPause,
     /// The touch plate for --on-pause probe: its thickness and where it
     /// lies (work X, Y; without it, under the tool), mm.
     #[arg(long, value_name = "THICKNESS[@X,Y]", value_parser = relievo::grbl::sender::TouchOff::parse)]
     pub plate: Option<relievo::grbl::sender::TouchOff>,
+    /// The tool setter for --on-pause setter: where it stands, machine
+    /// X,Y and the Z to probe down from, mm (a machine file's [setter]).
+    #[arg(long, value_name = "X,Y,Z", value_parser = relievo::grbl::sender::Setter::parse)]
+    pub setter: Option<relievo::grbl::sender::Setter>,
 }
 
 /// Ctrl-C: set by the signal handler, read by the sender.
@@ -88,9 +93,13 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         stall: Some(args.stall_timeout),
         on_pause: args.on_pause,
         plate: args.plate,
+        setter: args.setter,
         keys: !quiet,
         remote: None,
     };
+    if args.on_pause == relievo::grbl::sender::OnPause::Setter && args.setter.is_none() {
+        relievo::bail!("--on-pause setter: give the tool setter with --setter X,Y,Z (machine, mm)");
+    }
     if args.on_pause == relievo::grbl::sender::OnPause::Probe && args.plate.is_none() {
         relievo::bail!("--on-pause probe: give the touch plate with --plate THICKNESS[@X,Y]");
     }

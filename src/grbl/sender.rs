@@ -8,12 +8,13 @@ pub use super::lines::{job_lines, load_job, JobLine};
 pub use super::replies::{parse_status, Replies, Status};
 use super::state::State;
 pub use super::stream::stream;
-pub use super::touchoff::{touch_off, TouchOff};
+pub use super::touchoff::{touch_off, Routine, Setter, TouchOff};
 use super::{alarm_meaning, error_meaning};
 use crate::bail;
 use crate::error::Result;
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
+use std::sync::{Arc, Mutex};
 
 /// What to do when the job pauses at an M0.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -26,6 +27,10 @@ pub enum OnPause {
     /// Touch off Z on the touch plate (--plate), then continue (asking
     /// first on a terminal, where the tool is to be fitted).
     Probe,
+    /// Measure the new tool on the tool setter (--setter) and move work
+    /// Z0 by its difference from the tool that set Z0 (measured before
+    /// the job starts), then continue (asking first on a terminal).
+    Setter,
 }
 
 #[derive(Clone, Debug)]
@@ -61,6 +66,9 @@ pub struct Options {
     pub on_pause: OnPause,
     /// The touch plate for `OnPause::Probe`.
     pub plate: Option<TouchOff>,
+    /// The tool setter for `OnPause::Setter`, and its reference (the
+    /// setter's top in work Z as the tool that set Z0 reads it).
+    pub setter: Option<(Setter, Arc<Mutex<Option<f64>>>)>,
     /// The shortest move sure to take a planner block: a step of the
     /// coarsest axis ($100-$102), since GRBL drops a move of no steps.
     pub min_move: f64,
@@ -130,6 +138,7 @@ impl Default for Options {
             clock: None,
             on_pause: OnPause::Ask,
             plate: None,
+            setter: None,
             keys: false,
             remote: None,
         }

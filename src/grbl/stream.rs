@@ -13,7 +13,7 @@ use super::resume::{highest_z, reentry_at, Journal, Tracker};
 use super::sender::{OnPause, Options, Outcome, Stop, STALL_MARGIN};
 use super::session::Realtime;
 use super::state::State;
-use super::touchoff::touch_off;
+use super::touchoff::{touch_off, Routine};
 use super::{CYCLE_START, FEED_HOLD, SPINDLE_STOP, STATUS};
 use crate::bail;
 use crate::error::Result;
@@ -625,11 +625,24 @@ impl<'a> Stream<'a> {
             return Ok(());
         }
         let k = self.items[item].job.unwrap_or(0);
+        let state = self.lines[k].state.as_deref().cloned();
+        let state = state.unwrap_or_else(|| Modal::new(DVec3::ZERO));
         if let (OnPause::Probe, Some(plate)) = (self.opts.on_pause, self.opts.plate) {
-            let state = self.lines[k].state.as_deref().cloned();
-            let state = state.unwrap_or_else(|| Modal::new(DVec3::ZERO));
             self.progress
                 .suspend(|| touch_off(r, &plate, Some(&state)))?;
+            self.watch.last_reply = r.port.now();
+        }
+        if let (OnPause::Setter, Some((setter, top))) = (self.opts.on_pause, &self.opts.setter) {
+            let measured = Routine::SetterApply(*setter, top.clone());
+            let said = self.progress.suspend(|| measured.run(r))?;
+            self.progress.suspend(|| eprintln!("{said}"));
+            // back where the job paused, its modes restored
+            for l in reentry_at(&state, highest_z(self.lines)) {
+                let reply = r.command(&l, 60.0)?;
+                if let Some(e) = reply.last().filter(|a| a.starts_with("error:")) {
+                    bail!("going back to the job after the tool setter: '{l}' got {e}");
+                }
+            }
             self.watch.last_reply = r.port.now();
         }
         self.phase = Phase::Sending;
@@ -674,7 +687,8 @@ fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
     if !line.note.is_empty() {
         what.push_str(&format!(" ({})", line.note));
     }
-    let ask = on == OnPause::Ask || (on == OnPause::Probe && std::io::stdin().is_terminal());
+    let touches = matches!(on, OnPause::Probe | OnPause::Setter);
+    let ask = on == OnPause::Ask || (touches && std::io::stdin().is_terminal());
     if ask {
         if !std::io::stdin().is_terminal() {
             bail!(
@@ -689,6 +703,8 @@ fn resume_pause(r: &mut Replies, line: &JobLine, on: OnPause) -> Result<()> {
             .map_err(|e| crate::Error(format!("reading the terminal: {e}")))?;
     } else if on == OnPause::Probe {
         eprintln!("{what}: touching off on the plate (--on-pause probe)");
+    } else if on == OnPause::Setter {
+        eprintln!("{what}: measuring the new tool on the setter (--on-pause setter)");
     } else {
         eprintln!("{what}: continuing (--on-pause continue)");
     }

@@ -41,6 +41,8 @@ pub struct SendJob {
     pub on_pause: sender::OnPause,
     /// The touch plate, for `OnPause::Probe`.
     pub plate: Option<sender::TouchOff>,
+    /// The tool setter, for `OnPause::Setter`.
+    pub setter: Option<sender::Setter>,
     /// Keys on the terminal while streaming (hold/resume, feed override).
     pub keys: bool,
     /// Watched and steered from elsewhere (the studio's page) instead of
@@ -72,6 +74,7 @@ impl SendJob {
             stall: self.stall.unwrap_or(defaults.stall),
             on_pause: self.on_pause,
             plate: self.plate,
+            setter: self.setter.map(|s| (s, Default::default())),
             keys: self.keys,
             remote: self.remote.clone(),
             ..defaults
@@ -147,6 +150,17 @@ impl SendJob {
         if self.resume.is_none() && self.resume_from.is_none() {
             // a fresh run starts a fresh journal
             crate::grbl::resume::Journal::open(&journal, true)?;
+        }
+        if let (sender::OnPause::Setter, Some((setter, top))) = (self.on_pause, &opts.setter) {
+            // the tool in the spindle set Z0: its reading is the reference
+            let said = sender::Routine::SetterReference(*setter, top.clone())
+                .run(&mut r)
+                .map_err(|e| {
+                    crate::Error(format!("{}: before the job: {}", self.job.display(), e.0))
+                })?;
+            if self.progress {
+                eprintln!("{said}");
+            }
         }
         let preamble = if start > 0 {
             reentry(&lines, start)
