@@ -471,7 +471,8 @@ fn the_eta_clock_follows_the_machine_time() {
         r.command("$$", 2.0).unwrap()
     };
     let lines = sender::load_job(&path).unwrap();
-    let clock = sender::clock(&lines, &text, &settings).unwrap();
+    // the machine stands at work X0 Y0 Z0, as the simulated GRBL starts
+    let clock = sender::clock(&lines, &text, &settings, Some(glam::DVec3::ZERO)).unwrap();
     assert_eq!(clock.len(), lines.len());
     assert!(clock.windows(2).all(|w| w[0] <= w[1]));
     let (o, _) = job(&path).run(&mut p, &AtomicBool::new(false)).unwrap();

@@ -255,7 +255,7 @@ impl ToolpathJob {
         }
         let progs: Vec<crate::gcode::Program> = texts
             .iter()
-            .map(|(_, text)| crate::gcode::program(text))
+            .map(|(_, text)| super::layout::Frame::program(text))
             .collect::<Result<_>>()?;
         for ((file, _), prog) in texts.iter().zip(&progs) {
             judge::fits_travel(prog, m, file)?;

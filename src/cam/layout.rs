@@ -193,6 +193,20 @@ impl Frame {
         )
     }
 
+    /// Where the tool stands when the job starts, in work coordinates: on
+    /// the work zero the carver set (the stock top's, or the spoilboard's
+    /// plus the stock's thickness: the tool rests on the stock top).
+    pub fn start(&self) -> glam::DVec3 {
+        glam::DVec3::new(0.0, 0.0, if self.z_bottom { self.stock.4 } else { 0.0 })
+    }
+
+    /// A job interpreted from where its frame header puts the tool at the
+    /// start (`start`), else from its highest Z.
+    pub fn program(text: &str) -> Result<crate::gcode::Program> {
+        let start = Frame::find(text)?.map(|f| f.start());
+        crate::gcode::program_at(text, start)
+    }
+
     /// The frame stated in a job's header comments, if any (in mm, as
     /// written by `comment`). A malformed frame line is an error.
     pub fn find(text: &str) -> Result<Option<Frame>> {

@@ -91,10 +91,18 @@ pub const MAX_ARC_RADIUS: f64 = 10_000.0;
 /// per-move record.
 pub const MAX_SEGMENTS: usize = 30_000_000;
 
-/// Interpret `text`. Errors name the line. Lines are parsed twice (the
-/// first pass finds the highest Z, where the tool is taken to start)
-/// rather than held, so that memory follows the moves, not the text.
+/// Interpret `text`, the tool taken to start at the job's highest Z over
+/// work X0 Y0 (where it is not known: nothing is cut on the way to the
+/// first move). Errors name the line.
 pub fn program(text: &str) -> Result<Program> {
+    program_at(text, None)
+}
+
+/// Interpret `text` with the tool starting at `start` (work coordinates,
+/// mm; None = the highest Z over X0 Y0, as `program`). Errors name the
+/// line. Lines are parsed twice (the first pass finds the highest Z)
+/// rather than held, so that memory follows the moves, not the text.
+pub fn program_at(text: &str, start: Option<DVec3>) -> Result<Program> {
     let mut max_z = 0.0f64;
     let mut count = 0;
     for (k, l) in text.lines().enumerate() {
@@ -108,7 +116,7 @@ pub fn program(text: &str) -> Result<Program> {
         lines: count,
         ..Default::default()
     };
-    let mut modal = modal::Modal::new(DVec3::new(0.0, 0.0, max_z));
+    let mut modal = modal::Modal::new(start.unwrap_or(DVec3::new(0.0, 0.0, max_z)));
     let mut stop = true;
     for (k, l) in text.lines().enumerate() {
         // '%' marks a program's start and end in a file; senders do not

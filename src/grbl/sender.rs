@@ -248,10 +248,16 @@ fn setting(settings: &[String], n: u32) -> Option<f64> {
 /// When each job line should end, in seconds from the start, by the
 /// planner-based time estimate with the controller's own rates,
 /// accelerations and junction deviation (`$110-$112`, `$120-$122`, `$11`;
-/// a generic profile's where it does not list them). None when the job
-/// has lines relievo cannot read.
-pub fn clock(lines: &[JobLine], text: &str, settings: &[String]) -> Option<Vec<f64>> {
-    let prog = crate::gcode::program(text).ok()?;
+/// a generic profile's where it does not list them), the tool starting at
+/// `start` (work coordinates, where the machine reports it; None = the
+/// job's highest Z). None when the job has lines relievo cannot read.
+pub fn clock(
+    lines: &[JobLine],
+    text: &str,
+    settings: &[String],
+    start: Option<glam::DVec3>,
+) -> Option<Vec<f64>> {
+    let prog = crate::gcode::program_at(text, start).ok()?;
     let mut m = crate::machine::Machine::load("grbl-generic").ok()?;
     for k in 0..3 {
         for (axes, n) in [(&mut m.max_rate, 110), (&mut m.acceleration, 120)] {

@@ -81,71 +81,14 @@ impl SendJob {
         };
         let mut r = Replies::new(port);
         r.handshake(opts.welcome_timeout)?;
-        let mut st = machine_state(&mut r)?;
-        if st.state == State::Check {
-            // left so by a check that was cut short: nothing moves in check
-            // mode, and leaving it (GRBL resets) loses nothing a job needs
-            eprintln!("GRBL was in check mode ($C): leaving it first");
-            sender::leave_check_mode(&mut r, opts.welcome_timeout)?;
-            st = machine_state(&mut r)?;
-        }
-        if matches!(
-            st.state,
-            State::Hold(_) | State::Door(_) | State::Run | State::Jog | State::Home
-        ) {
-            bail!(
-                "GRBL is in {} (a job, a hold or an open door): left as it is, nothing was \
-                 sent; finish or resume it on the machine (or `relievo machine reset` to stop \
-                 it), then send again",
-                st.state
-            );
-        }
-        if st.state == State::Alarm {
-            bail!(
-                "GRBL is in alarm (position may be lost after a reset in motion): check the \
-                 machine, then `relievo machine home` or `unlock` on this port, and send again"
-            );
-        }
+        let st = ready(&mut r, &opts)?;
         // an idle machine's free planner blocks are all its blocks
         if let (State::Idle, Some((blocks, _))) = (st.state, st.free) {
             opts.planner = blocks.max(1);
         }
-        // steps per mm tell which moves surely take a planner block; the
-        // rates and accelerations time the job for the ETA
-        if let Ok(settings) = r.command("$$", 2.0) {
-            if let Some(m) = sender::min_move(&settings) {
-                opts.min_move = m;
-            }
-            // the ETA's and the watchdog's clock
-            {
-                let text = crate::input::read_text(&self.job, crate::input::MAX_FILE)?;
-                opts.clock = sender::clock(&lines, &text, &settings).map(|c| {
-                    let base = if start > 0 { c[start - 1] } else { 0.0 };
-                    c[start..].iter().map(|t| t - base).collect()
-                });
-            }
-        }
-        if self.check || self.check_only {
-            let errors = sender::check(&mut r, &lines, &opts)?;
-            if !errors.is_empty() {
-                let list: Vec<String> = errors.iter().map(|e| e.describe()).collect();
-                bail!(
-                    "{}: check mode found {} bad line(s), nothing was moved: {}",
-                    self.job.display(),
-                    errors.len(),
-                    list.join("; ")
-                );
-            }
-            if self.progress || self.check_only {
-                eprintln!(
-                    "{}: check passed: {} lines",
-                    self.job.display(),
-                    lines.len()
-                );
-            }
-            if self.check_only {
-                return Ok((Outcome::default(), 0));
-            }
+        self.read_settings(&mut r, &mut opts, &lines, start, &st)?;
+        if (self.check || self.check_only) && self.check(&mut r, &lines, &opts)? {
+            return Ok((Outcome::default(), 0));
         }
         if self.resume.is_none() && self.resume_from.is_none() {
             // a fresh run starts a fresh journal
@@ -182,6 +125,60 @@ impl SendJob {
         Ok((out, lines.len() - start))
     }
 
+    /// GRBL's `$$`: steps per mm tell which moves surely take a planner
+    /// block; the rates and accelerations time the job (the ETA's and the
+    /// watchdog's clock) from where the machine stands.
+    fn read_settings(
+        &self,
+        r: &mut Replies,
+        opts: &mut Options,
+        lines: &[sender::JobLine],
+        start: usize,
+        st: &sender::Status,
+    ) -> Result<()> {
+        let Ok(settings) = r.command("$$", 2.0) else {
+            return Ok(());
+        };
+        if let Some(m) = sender::min_move(&settings) {
+            opts.min_move = m;
+        }
+        let text = crate::input::read_text(&self.job, crate::input::MAX_FILE)?;
+        let at = match (st.work, st.wco) {
+            (true, _) => Some(st.pos),
+            (false, Some(w)) => Some([st.pos[0] - w[0], st.pos[1] - w[1], st.pos[2] - w[2]]),
+            (false, None) => None,
+        };
+        let at = at.filter(|_| start == 0).map(glam::DVec3::from);
+        opts.clock = sender::clock(lines, &text, &settings, at).map(|c| {
+            let base = if start > 0 { c[start - 1] } else { 0.0 };
+            c[start..].iter().map(|t| t - base).collect()
+        });
+        Ok(())
+    }
+
+    /// The whole job through GRBL's check mode; true when that is all
+    /// that was asked.
+    fn check(&self, r: &mut Replies, lines: &[sender::JobLine], opts: &Options) -> Result<bool> {
+        let errors = sender::check(r, lines, opts)?;
+        if !errors.is_empty() {
+            let list: Vec<String> = errors.iter().map(|e| e.describe()).collect();
+            bail!(
+                "{}: check mode found {} bad line(s), nothing was moved: {}",
+                self.job.display(),
+                errors.len(),
+                list.join("; ")
+            );
+        }
+        if self.progress || self.check_only {
+            eprintln!(
+                "{}: check passed: {} lines",
+                self.job.display(),
+                lines.len()
+            );
+        }
+        Ok(self.check_only)
+    }
+
     /// Index of the first job line to send.
     fn start(&self, lines: &[JobLine]) -> Result<usize> {
         let from = match (&self.resume, self.resume_from) {
@@ -199,6 +196,37 @@ impl SendJob {
             ),
         }
     }
+}
+
+/// The machine as found, ready for a job: taken out of check mode (left
+/// so by a check cut short), else refused when busy, held or in alarm.
+fn ready(r: &mut Replies, opts: &Options) -> Result<sender::Status> {
+    let mut st = machine_state(r)?;
+    if st.state == State::Check {
+        // nothing moves in check mode, and leaving it (GRBL resets) loses
+        // nothing a job needs
+        eprintln!("GRBL was in check mode ($C): leaving it first");
+        sender::leave_check_mode(r, opts.welcome_timeout)?;
+        st = machine_state(r)?;
+    }
+    if matches!(
+        st.state,
+        State::Hold(_) | State::Door(_) | State::Run | State::Jog | State::Home
+    ) {
+        bail!(
+            "GRBL is in {} (a job, a hold or an open door): left as it is, nothing was \
+             sent; finish or resume it on the machine (or `relievo machine reset` to stop \
+             it), then send again",
+            st.state
+        );
+    }
+    if st.state == State::Alarm {
+        bail!(
+            "GRBL is in alarm (position may be lost after a reset in motion): check the \
+             machine, then `relievo machine home` or `unlock` on this port, and send again"
+        );
+    }
+    Ok(st)
 }
 
 /// The machine's state as its status report gives it.

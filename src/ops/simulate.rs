@@ -39,6 +39,11 @@ pub struct SimulateJob {
     /// Job coordinates of the machine travel box's lower-left corner;
     /// `None` = the stock's lower-left corner.
     pub travel_origin: Option<(f64, f64)>,
+    /// Where the tool stands when each file starts (work coordinates);
+    /// `None` = where the job's frame header puts the work zero (the
+    /// tool on the stock top over X0 Y0), else the job's highest Z over
+    /// X0 Y0.
+    pub start: Option<glam::DVec3>,
     pub output: PathBuf,
     pub report: Option<PathBuf>,
     pub deviation: Option<PathBuf>,
@@ -56,6 +61,7 @@ impl Default for SimulateJob {
             oversample: None,
             machine: "grbl-generic".into(),
             travel_origin: None,
+            start: None,
             output: PathBuf::from("cut.png"),
             report: None,
             deviation: None,
@@ -269,8 +275,9 @@ impl SimulateJob {
                 }
                 _ => {}
             }
+            let start = self.start.or(f.map(|f| f.start()));
             let prog = t
-                .time("parse", || gcode::program(&text))
+                .time("parse", || gcode::program_at(&text, start))
                 .map_err(|e| crate::Error(format!("{what}: {e}")))?;
             progs.push((what, prog, offset));
         }

@@ -401,7 +401,7 @@ impl Studio {
         }
         .run()?;
         let text = crate::input::read_text(&nc, crate::input::MAX_FILE)?;
-        let program = crate::gcode::program(&text)?;
+        let program = crate::cam::layout::Frame::program(&text)?;
         let model = self.model();
         let j = Arc::new(JobMade {
             command: carve_command(model.name.as_deref(), s, c),
