@@ -84,22 +84,15 @@ fn setter_feed() -> f64 {
 }
 
 impl Setter {
-    /// `X,Y,Z` (machine coordinates, mm).
-    pub fn parse(s: &str) -> std::result::Result<Setter, String> {
-        let v: Vec<f64> = s
-            .split(',')
-            .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
-            .collect::<Option<_>>()
-            .ok_or_else(|| format!("'{s}': expected the setter's machine X,Y,Z in mm"))?;
-        match v[..] {
-            [x, y, z] => Ok(Setter {
-                x,
-                y,
-                z,
-                travel: setter_travel(),
-                feed: setter_feed(),
-            }),
-            _ => Err(format!("'{s}': expected the setter's machine X,Y,Z in mm")),
+    /// A setter at machine `[x, y, z]`, probed at the default travel and
+    /// feed.
+    pub fn at([x, y, z]: [f64; 3]) -> Setter {
+        Setter {
+            x,
+            y,
+            z,
+            travel: setter_travel(),
+            feed: setter_feed(),
         }
     }
 }

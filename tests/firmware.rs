@@ -329,7 +329,7 @@ fn the_machine_panel_s_session_drives_the_firmware() {
 /// (the machine Idle, jogged there), continued to its end.
 #[test]
 fn the_page_drives_the_firmware() {
-    use common::browser::{connect, make_job, run_to_end, Browser, Studio};
+    use common::browser::{connect, lines_past, make_job, run_to_end, Browser, Studio};
     let Some(fw) = firmware("the_page_drives_the_firmware") else {
         return;
     };
@@ -376,14 +376,7 @@ fn the_page_drives_the_firmware() {
     // run, stopped midway (hold, spindle off, reset), unlocked, resumed
     // from the journal through the tool change to the end
     b.click("#m-run");
-    b.wait("some progress", 120, || {
-        let t = b.text("#m-jobtext");
-        t.split(": ")
-            .nth(1)
-            .and_then(|x| x.split(' ').next())
-            .and_then(|n| n.parse::<usize>().ok())
-            .filter(|&n| n > 40)
-    });
+    lines_past(&b, 40, 120);
     b.click("#m-stop");
     let stopped = text("#m-jobtext", "the stop", 60, &|t| t.contains("stopped"));
     assert!(stopped.contains("resume"), "{stopped}");

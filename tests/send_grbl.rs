@@ -776,7 +776,7 @@ fn a_tool_change_touches_off_on_the_plate() {
             on_pause,
             plate: Some(sender::TouchOff::parse(&plate).unwrap()),
             // the same block as a tool setter, probed from Z40
-            setter: Some(sender::Setter::parse(&format!("{},{},40", at[0], at[1])).unwrap()),
+            setter: Some(sender::Setter::at([at[0], at[1], 40.0])),
             ..job(&path)
         };
         if let Err(e) = go.run(&mut p, &AtomicBool::new(false)) {

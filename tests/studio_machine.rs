@@ -7,7 +7,9 @@
 
 mod common;
 
-use common::browser::{connect, make_job, run_to_end, wait_text, work_xy, Browser, Studio};
+use common::browser::{
+    connect, lines_past, make_job, run_to_end, wait_text, work_xy, Browser, Studio,
+};
 use common::scratch;
 use std::io::{Read, Write};
 use std::path::Path;
@@ -293,14 +295,7 @@ fn the_page_stops_and_resumes_a_job_from_its_journal() {
     make_job(&b, &[("#width", "40"), ("#resolution", "128")]);
     connect(&b, &link);
     b.click("#m-run");
-    b.wait("some progress", 60, || {
-        let t = b.text("#m-jobtext");
-        t.split(": ")
-            .nth(1)
-            .and_then(|x| x.split(' ').next())
-            .and_then(|n| n.parse::<usize>().ok())
-            .filter(|&n| n > 500)
-    });
+    lines_past(&b, 500, 60);
     b.click("#m-stop");
     let stopped = b.wait("the stop", 60, || {
         let t = b.text("#m-jobtext");

@@ -64,7 +64,7 @@ pub struct SendArgs {
     pub plate: Option<relievo::grbl::sender::TouchOff>,
     /// The tool setter for --on-pause setter: where it stands, machine
     /// X,Y and the Z to probe down from, mm (a machine file's [setter]).
-    #[arg(long, value_name = "X,Y,Z", value_parser = relievo::grbl::sender::Setter::parse)]
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_setter, allow_hyphen_values = true)]
     pub setter: Option<relievo::grbl::sender::Setter>,
 }
 
@@ -139,4 +139,9 @@ pub fn run(args: SendArgs, quiet: bool) -> relievo::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The tool setter's machine `X,Y,Z`, mm.
+fn parse_setter(s: &str) -> Result<relievo::grbl::sender::Setter, String> {
+    relievo::ops::settings::parse_xyz(s).map(relievo::grbl::sender::Setter::at)
 }

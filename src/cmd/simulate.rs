@@ -50,7 +50,7 @@ pub struct SimulateArgs {
     /// Where the tool stands when the job starts, work X,Y,Z mm [default:
     /// on the work zero the job's frame header names (X0 Y0, the stock
     /// top), else the job's highest Z over X0 Y0].
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_start, allow_negative_numbers = true)]
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_start, allow_hyphen_values = true)]
     pub start: Option<glam::DVec3>,
     /// Cut surface as a relief PNG (+ JSON sidecar).
     #[arg(short, long, default_value = "cut.png")]
@@ -100,13 +100,5 @@ pub fn run(args: SimulateArgs, quiet: bool, verbose: bool) -> relievo::Result<()
 
 /// `X,Y,Z`, mm.
 fn parse_start(s: &str) -> Result<glam::DVec3, String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
-        .collect::<Option<_>>()
-        .ok_or_else(|| format!("'{s}': expected X,Y,Z in mm"))?;
-    match v[..] {
-        [x, y, z] => Ok(glam::DVec3::new(x, y, z)),
-        _ => Err(format!("'{s}': expected X,Y,Z in mm")),
-    }
+    relievo::ops::settings::parse_xyz(s).map(glam::DVec3::from)
 }

@@ -102,15 +102,10 @@ impl Remote {
         self.steps.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// A line from the page for a job held at a tool change.
-    pub fn push_line(&self, l: &str) {
-        self.queue().push_back(Step::Line(l.to_string()));
-    }
-
-    /// A touch-off or a tool setter's measure for a job held at a tool
-    /// change.
-    pub fn push_routine(&self, r: Routine) {
-        self.queue().push_back(Step::Routine(r));
+    /// A line, a touch-off or a tool setter's measure from the page for
+    /// a job held at a tool change.
+    pub fn push_step(&self, step: Step) {
+        self.queue().push_back(step);
     }
 
     /// Held before a pause line `what` with the machine Idle: the page's

@@ -135,6 +135,19 @@ pub struct Status {
     pub accessories: String,
 }
 
+impl Status {
+    /// Machine and work position, given the work offset (a report that
+    /// carries none stands on the last one seen).
+    pub fn positions(&self, wco: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        let other = [0, 1, 2].map(|k| self.pos[k] + if self.work { wco[k] } else { -wco[k] });
+        if self.work {
+            (other, self.pos)
+        } else {
+            (self.pos, other)
+        }
+    }
+}
+
 /// The first `N` comma-separated numbers of a field (GRBL built with
 /// more axes sends more).
 fn numbers<T: std::str::FromStr + Copy + Default, const N: usize>(v: &str) -> Option<[T; N]> {

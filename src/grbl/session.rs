@@ -261,13 +261,8 @@ impl Readout {
             return false;
         };
         self.wco = st.wco.or(self.wco);
-        let wco = self.wco.unwrap_or_default();
-        let other = [0, 1, 2].map(|k| st.pos[k] + if st.work { wco[k] } else { -wco[k] });
-        (self.mpos, self.wpos) = if st.work {
-            (Some(other), Some(st.pos))
-        } else {
-            (Some(st.pos), Some(other))
-        };
+        let (mpos, wpos) = st.positions(self.wco.unwrap_or_default());
+        (self.mpos, self.wpos) = (Some(mpos), Some(wpos));
         if let Some((feed, spindle)) = st.feed {
             self.feed = Some(feed);
             self.spindle = spindle.or(self.spindle);
@@ -286,11 +281,8 @@ impl Readout {
 /// What the operator asks of the session.
 pub enum Ask {
     /// A line (G-code or `$` command), sent when the one before is
-    /// answered.
-    Line(String),
-    /// A touch-off or a setter's measure, run when the line before is
-    /// answered.
-    Routine(Routine),
+    /// answered; or a touch-off or a setter's measure, run then.
+    Step(Step),
     /// Lend the port to a job's sender; the session waits meanwhile.
     Lend(Lent),
     Close,
@@ -389,45 +381,42 @@ impl Session {
                 "'{text}': a line is 1 to 120 ASCII characters (GRBL's line buffer)"
             ));
         }
+        self.step(Step::Line(text.to_string()))
+    }
+
+    /// A touch-off or a setter's measure, after the lines before it.
+    pub fn routine(&self, routine: Routine) -> std::result::Result<(), String> {
+        self.step(Step::Routine(routine))
+    }
+
+    /// Queue a line or a routine; a job held at its tool change has its
+    /// sender pass it on. Refused when the link is down, a job runs, or
+    /// (lines) too many wait.
+    fn step(&self, step: Step) -> std::result::Result<(), String> {
         let r = self.shared.now();
         if !r.connected {
             return Err("not connected".into());
         }
         if let Some(j) = r.job.as_ref().filter(|j| j.running) {
             if j.paused.is_none() {
-                return Err("a job is running: lines wait for its tool change".into());
+                return Err(match step {
+                    Step::Line(_) => "a job is running: lines wait for its tool change",
+                    Step::Routine(_) => "a job is running: probing waits for its tool change",
+                }
+                .into());
             }
-            // held at a tool change: the sender passes it on
-            self.remote.push_line(text);
-            self.shared.update(|s| s.say("sent", text, None));
+            if let Step::Line(text) = &step {
+                self.shared.update(|s| s.say("sent", text, None));
+            }
+            self.remote.push_step(step);
             return Ok(());
         }
-        if r.pending >= MAX_QUEUED {
+        if matches!(step, Step::Line(_)) && r.pending >= MAX_QUEUED {
             return Err(format!("{} lines already wait for GRBL", r.pending));
         }
         self.shared.update(|r| r.pending += 1);
         self.asks
-            .send(Ask::Line(text.to_string()))
-            .map_err(|_| "not connected".to_string())
-    }
-
-    /// A touch-off or a setter's measure, after the lines before it (or,
-    /// a job held at its tool change, passed to its sender).
-    pub fn routine(&self, routine: Routine) -> std::result::Result<(), String> {
-        let r = self.shared.now();
-        if !r.connected {
-            return Err("not connected".into());
-        }
-        if let Some(j) = r.job.as_ref().filter(|j| j.running) {
-            if j.paused.is_none() {
-                return Err("a job is running: probing waits for its tool change".into());
-            }
-            self.remote.push_routine(routine);
-            return Ok(());
-        }
-        self.shared.update(|r| r.pending += 1);
-        self.asks
-            .send(Ask::Routine(routine))
+            .send(Ask::Step(step))
             .map_err(|_| "not connected".to_string())
     }
 
@@ -582,8 +571,7 @@ impl<'a> Link<'a> {
             while let Ok(ask) = asks.try_recv() {
                 match ask {
                     Ask::Close => return Ok(()),
-                    Ask::Line(l) => self.queue.push_back(Step::Line(l)),
-                    Ask::Routine(routine) => self.queue.push_back(Step::Routine(routine)),
+                    Ask::Step(step) => self.queue.push_back(step),
                     Ask::Lend(work) => {
                         work(&mut *r.port);
                         self.last_heard = r.port.now();

@@ -177,8 +177,9 @@ pub fn touch_off(r: &mut Replies, t: &TouchOff, job: Option<&Modal>) -> Result<(
 
 /// Up to the setter's Z, over it, touch it; back up. Returns the
 /// trigger point's work Z (the setter's top as this tool and the
-/// present work zero see it), the machine back at the setter's Z.
-fn measure(r: &mut Replies, s: &Setter) -> Result<f64> {
+/// present work zero see it) and the active system's Z offset, the
+/// machine back at the setter's Z.
+fn measure(r: &mut Replies, s: &Setter) -> Result<(f64, f64)> {
     let n = crate::gcode::emit::num;
     exchange(r, "G21", 5.0)?;
     exchange(r, &format!("G53G0Z{}", n(s.z)), 60.0)?;
@@ -186,7 +187,7 @@ fn measure(r: &mut Replies, s: &Setter) -> Result<f64> {
     let prb = touch(r, s.travel, s.feed)?;
     exchange(r, &format!("G53G0Z{}", n(s.z)), 60.0)?;
     let (between, wcs_z) = offsets(r)?;
-    Ok(prb.z - between - wcs_z)
+    Ok((prb.z - between - wcs_z, wcs_z))
 }
 
 /// Something done with the port between lines, on the machine's behalf:
@@ -218,7 +219,7 @@ impl Routine {
                 ))
             }
             Routine::SetterReference(s, top) => {
-                let z = measure(r, s)?;
+                let (z, _) = measure(r, s)?;
                 *top.lock().unwrap_or_else(|e| e.into_inner()) = Some(z);
                 Ok(format!(
                     "tool setter: this tool reads the setter's top at work Z{z:.3} (the reference)"
@@ -231,8 +232,7 @@ impl Routine {
                          changing it"
                     );
                 };
-                let z = measure(r, s)?;
-                let (_, wcs_z) = offsets(r)?;
+                let (z, wcs_z) = measure(r, s)?;
                 let shift = z - reference;
                 exchange(r, &format!("G10L2P0Z{}", n(wcs_z + shift)), 5.0)?;
                 Ok(format!(

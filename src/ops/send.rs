@@ -60,7 +60,9 @@ impl SendJob {
     }
 
     pub fn run(&self, port: &mut dyn Port, cancel: &AtomicBool) -> Result<(Outcome, usize)> {
-        let lines = sender::load_job(&self.job)?;
+        // read once: the lines to send, and the text the clock times
+        let text = crate::input::read_text(&self.job, crate::input::MAX_FILE)?;
+        let lines = sender::job_lines(&text, &self.job.display().to_string())?;
         let start = self.start(&lines)?;
         let journal = self.journal_path();
         let defaults = Options::default();
@@ -86,7 +88,7 @@ impl SendJob {
         if let (State::Idle, Some((blocks, _))) = (st.state, st.free) {
             opts.planner = blocks.max(1);
         }
-        self.read_settings(&mut r, &mut opts, &lines, start, &st)?;
+        self.read_settings(&mut r, &mut opts, (&text, &lines), start, &st)?;
         if (self.check || self.check_only) && self.check(&mut r, &lines, &opts)? {
             return Ok((Outcome::default(), 0));
         }
@@ -132,7 +134,7 @@ impl SendJob {
         &self,
         r: &mut Replies,
         opts: &mut Options,
-        lines: &[sender::JobLine],
+        (text, lines): (&str, &[sender::JobLine]),
         start: usize,
         st: &sender::Status,
     ) -> Result<()> {
@@ -142,14 +144,10 @@ impl SendJob {
         if let Some(m) = sender::min_move(&settings) {
             opts.min_move = m;
         }
-        let text = crate::input::read_text(&self.job, crate::input::MAX_FILE)?;
-        let at = match (st.work, st.wco) {
-            (true, _) => Some(st.pos),
-            (false, Some(w)) => Some([st.pos[0] - w[0], st.pos[1] - w[1], st.pos[2] - w[2]]),
-            (false, None) => None,
-        };
-        let at = at.filter(|_| start == 0).map(glam::DVec3::from);
-        opts.clock = sender::clock(lines, &text, &settings, at).map(|c| {
+        // the job starts where the machine stands, if the report says
+        let at = (st.work || st.wco.is_some()) && start == 0;
+        let at = at.then(|| glam::DVec3::from(st.positions(st.wco.unwrap_or_default()).1));
+        opts.clock = sender::clock(lines, text, &settings, at).map(|c| {
             let base = if start > 0 { c[start - 1] } else { 0.0 };
             c[start..].iter().map(|t| t - base).collect()
         });

@@ -418,6 +418,19 @@ pub fn parse_pair(s: &str) -> std::result::Result<(f64, f64), String> {
     }
 }
 
+/// `X,Y,Z`, mm (finite).
+pub fn parse_xyz(s: &str) -> std::result::Result<[f64; 3], String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<_>>()
+        .ok_or_else(|| format!("'{s}': expected X,Y,Z in mm"))?;
+    match v[..] {
+        [x, y, z] => Ok([x, y, z]),
+        _ => Err(format!("'{s}': expected X,Y,Z in mm")),
+    }
+}
+
 /// Settings that change which files a job makes (roughing in a file of its
 /// own, one file per tile): the command line's, not a page's, which offers
 /// one job file.

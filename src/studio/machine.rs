@@ -206,7 +206,9 @@ fn probe(s: &Session, call: &Call) -> Result<(), String> {
 /// The tool setter: measure the tool that set Z0 (the reference), or a
 /// new tool, whose difference moves work Z0.
 fn setter(studio: &Studio, s: &Session, call: &Call) -> Result<(), String> {
-    let at = Setter::parse(call.setter.trim()).map_err(|e| format!("tool setter: {e}"))?;
+    let at = crate::ops::settings::parse_xyz(call.setter.trim())
+        .map(Setter::at)
+        .map_err(|e| format!("tool setter: {e} (the setter's machine position)"))?;
     let top = studio.machine.setter_top.clone();
     s.routine(match call.step.as_str() {
         "reference" => Routine::SetterReference(at, top),

@@ -289,6 +289,19 @@ pub fn connect(b: &Browser, link: &Path) {
     wait_text(b, "#m-state", "the machine Idle", |t| t == "Idle");
 }
 
+/// Once the running job's line count on the page passes `n` (at most
+/// `secs` seconds).
+pub fn lines_past(b: &Browser, n: usize, secs: u64) {
+    b.wait("some progress", secs, || {
+        let t = b.text("#m-jobtext");
+        t.split(": ")
+            .nth(1)
+            .and_then(|x| x.split(' ').next())
+            .and_then(|k| k.parse::<usize>().ok())
+            .filter(|&k| k > n)
+    });
+}
+
 /// The job's end, once the page tells it; a tool change on the way is
 /// continued (the carver has fitted the tool).
 pub fn run_to_end(b: &Browser, what: &str) -> String {
