@@ -143,6 +143,26 @@ enum AxisCommand {
 /// The value words GRBL reads, by letter.
 const VALUE_WORDS: &str = "FIJKLNPRSTXYZ";
 
+/// A float to an integer as GRBL's C does on the host it was recorded on
+/// (x86 cvttsd2si): truncated, and out of the int32 range the "integer
+/// indefinite" i32::MIN; narrower C types then keep the low bits.
+fn c_int(x: f64) -> i32 {
+    if x.is_nan() || x >= 2_147_483_648.0 || x <= -2_147_483_649.0 {
+        i32::MIN
+    } else {
+        x.trunc() as i32
+    }
+}
+
+/// A G or M word's number as GRBL splits it: the integer in 8 bits (so
+/// G256 reads as G0 with hundredths 25600, and M-3 as M253) and the
+/// hundredths of the float's remainder in 16 bits.
+fn command_number(value: f64) -> (i64, i64) {
+    let int = c_int(value) as u8;
+    let rest = 100.0f32 * (value as f32 - int as f32);
+    (int as i64, c_int((rest as f64).round()) as u16 as i64)
+}
+
 fn bit(c: char) -> u32 {
     1 << (c as u32 - 'A' as u32)
 }
@@ -229,10 +249,10 @@ impl Modal {
         if let Some(code) = l.bad {
             return refuse(
                 code,
-                if code == 1 {
-                    "expected a word's letter"
-                } else {
-                    "a word without a valid number"
+                match code {
+                    11 => "the line is longer than GRBL's 80-character line buffer",
+                    1 => "expected a word's letter",
+                    _ => "a word without a valid number",
                 },
             );
         }
@@ -286,9 +306,7 @@ impl Modal {
     /// One word of the block (step 2), by its letter: a G or M command
     /// sets its modal group's mode, a value word is kept.
     fn word(&mut self, b: &mut Block, c: char, value: f64) -> Result<(), Refusal> {
-        let int = value.trunc();
-        let mantissa = (100.0 * (value - int)).round() as i64;
-        let int = int as i64;
+        let (int, mantissa) = command_number(value);
         match c {
             'G' => {
                 let group = self.g_command(b, int, mantissa, value)?;
@@ -319,8 +337,8 @@ impl Modal {
                 }
                 b.seen |= bit(c);
                 b.val[c as usize - 'A' as usize] = match c {
-                    'L' | 'T' => int as u8 as f64,
-                    'N' => value.trunc(),
+                    'L' | 'T' => int as f64,
+                    'N' => c_int(value) as f64,
                     _ => value,
                 };
             }
@@ -500,7 +518,8 @@ impl Modal {
                 if !b.has('P') && !b.has('L') {
                     return refuse(28, "G10 needs L and P words");
                 }
-                let p = b.v('P').trunc();
+                // GRBL keeps the system's number in 8 bits
+                let p = c_int(b.v('P')) as u8 as f64;
                 if p > N_COORD_SYSTEMS {
                     return refuse(29, format!("no coordinate system P{p}"));
                 }

@@ -16,8 +16,9 @@ pub struct Line {
     pub words: Vec<(char, f64)>,
     /// Text of the comments on the line (without delimiters).
     pub comments: Vec<String>,
-    /// GRBL's error for the word after the last one read, if reading
-    /// stopped there: 1 (expected a letter) or 2 (bad number).
+    /// GRBL's error for the line, if reading stopped: 11 (longer than
+    /// its line buffer, no word read), or for the word after the last one
+    /// read: 1 (expected a letter) or 2 (bad number).
     pub bad: Option<u32>,
 }
 
@@ -51,16 +52,36 @@ fn split(line: &str) -> (String, Vec<String>) {
 }
 
 /// GRBL's read_float: an optional sign, then digits with at most one
-/// point, at least one digit; where the number ends.
+/// point, at least one digit; where the number ends. The value is GRBL's
+/// float: the first 8 digits as an integer, scaled by tens in single
+/// precision as GRBL scales them, so that every later test (an integer
+/// command, a negative word, a radius) sees the number GRBL sees.
 fn read_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
-    let start = i;
-    if i < b.len() && (b[i] == b'-' || b[i] == b'+') {
-        i += 1;
-    }
-    let (mut digits, mut point) = (0, false);
+    let negative = match b.get(i) {
+        Some(b'-') => {
+            i += 1;
+            true
+        }
+        Some(b'+') => {
+            i += 1;
+            false
+        }
+        _ => false,
+    };
+    let (mut int, mut exp, mut digits, mut point) = (0u32, 0i32, 0, false);
     while i < b.len() {
         match b[i] {
-            b'0'..=b'9' => digits += 1,
+            c @ b'0'..=b'9' => {
+                digits += 1;
+                if digits <= 8 {
+                    if point {
+                        exp -= 1;
+                    }
+                    int = int * 10 + (c - b'0') as u32;
+                } else if !point {
+                    exp += 1; // digits past the eighth are dropped
+                }
+            }
             b'.' if !point => point = true,
             _ => break,
         }
@@ -69,17 +90,37 @@ fn read_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
     if digits == 0 {
         return None;
     }
-    let v: f64 = std::str::from_utf8(&b[start..i]).ok()?.parse().ok()?;
-    Some((v, i))
+    // each step in double precision, kept as a float, as C does it
+    let scale = |v: f32, by: f64| (v as f64 * by) as f32;
+    let mut v = int as f32;
+    if v != 0.0 {
+        while exp <= -2 {
+            v = scale(v, 0.01);
+            exp += 2;
+        }
+        if exp < 0 {
+            v = scale(v, 0.1);
+        }
+        while exp > 0 {
+            v = scale(v, 10.0);
+            exp -= 1;
+        }
+    }
+    Some((if negative { -v } else { v } as f64, i))
 }
+
+/// The longest line GRBL's line buffer holds, after comments and spaces
+/// are dropped (LINE_BUFFER_SIZE 80, one for the terminator); a longer
+/// one is refused whole with error:11.
+pub const LINE_MAX: usize = 79;
 
 /// Read one line (`number` names it).
 pub fn parse_line(text: &str, number: usize) -> Line {
     let (stripped, comments) = split(text);
     let b = stripped.as_bytes();
     let mut words = Vec::new();
-    let mut bad = None;
-    let mut i = 0;
+    let mut bad = (b.len() > LINE_MAX).then_some(11);
+    let mut i = if bad.is_some() { b.len() } else { 0 };
     while i < b.len() {
         let letter = b[i];
         if !letter.is_ascii_uppercase() {

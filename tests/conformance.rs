@@ -1,0 +1,254 @@
+//! GRBL 1.1h conformance: the corpus in tests/data/conformance (programs
+//! of a prelude and one line, with the answers GRBL 1.1h's own protocol
+//! loop and parser printed, recorded by its generate.py) run through
+//! relievo's simulated GRBL, its check mode as `send --check-only` uses
+//! it, and `simulate`'s program reader. No firmware is needed here.
+
+use relievo::grbl::sim::SimGrbl;
+use relievo::machine::Machine;
+use serde_json::Value;
+use std::collections::BTreeMap;
+
+struct Program {
+    family: String,
+    lines: Vec<String>,
+    /// What GRBL printed for each line, up to and including its answer.
+    out: Vec<Vec<String>>,
+}
+
+fn corpus() -> Vec<Program> {
+    include_str!("data/conformance/programs.jsonl")
+        .lines()
+        .map(|l| {
+            let v: Value = serde_json::from_str(l).expect("a JSON program");
+            let strs = |v: &Value| -> Vec<String> {
+                v.as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|s| s.as_str().unwrap().to_string())
+                    .collect()
+            };
+            Program {
+                family: v["f"].as_str().unwrap().to_string(),
+                lines: strs(&v["in"]),
+                out: v["out"].as_array().unwrap().iter().map(strs).collect(),
+            }
+        })
+        .collect()
+}
+
+/// GRBL 1.1h's default settings (its defaults.h, the generic build), as
+/// the corpus's EEPROM held them.
+fn grbl_defaults() -> Machine {
+    Machine::parse(
+        r#"name = "GRBL 1.1h defaults"
+dialect = "grbl-1.1"
+rx_buffer = 128
+junction_deviation = 0.01
+[travel]
+x = 200.0
+y = 200.0
+z = 200.0
+[max_rate]
+x = 500.0
+y = 500.0
+z = 500.0
+[acceleration]
+x = 10.0
+y = 10.0
+z = 10.0
+[steps_per_mm]
+x = 250.0
+y = 250.0
+z = 250.0
+[spindle]
+min = 0.0
+max = 1000.0
+"#,
+        "GRBL defaults",
+    )
+    .unwrap()
+}
+
+/// A program's last answer: ok or error:N, with any ALARM and [PRB:] lines.
+fn verdict(out: &[Vec<String>]) -> String {
+    let Some(last) = out.last() else {
+        return "nothing".into();
+    };
+    last.iter()
+        .filter(|l| *l == "ok" || l.starts_with("error:") || l.starts_with("ALARM") || l.starts_with("[PRB:"))
+        .cloned()
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Each line of a program through a fresh simulated GRBL: what it printed
+/// for each line, up to its answer.
+fn through_sim(p: &Program, check: bool) -> Vec<Vec<String>> {
+    let mut s = SimGrbl::new(&grbl_defaults());
+    s.take_output();
+    let mut t = 0.0;
+    let mut send = |s: &mut SimGrbl, line: &str| -> Vec<String> {
+        for b in line.bytes().chain([b'\n']) {
+            s.receive(b);
+        }
+        let mut heard = String::new();
+        loop {
+            heard.push_str(&String::from_utf8_lossy(&s.take_output()));
+            let lines: Vec<String> = heard
+                .lines()
+                .map(|l| l.trim_end_matches('\r').to_string())
+                .filter(|l| !l.is_empty())
+                .collect();
+            let answered = lines
+                .last()
+                .is_some_and(|l| l == "ok" || l.starts_with("error:"));
+            if heard.ends_with('\n') && answered {
+                return lines;
+            }
+            // on to the machine's next event (a move's end, a dwell's)
+            match s.next_event() {
+                Some(at) if at < t + 1e6 => {
+                    t = at.max(t);
+                    s.advance(t);
+                }
+                _ => {
+                    let mut v = lines;
+                    v.push("(no answer)".into());
+                    return v;
+                }
+            }
+        }
+    };
+    if check {
+        send(&mut s, "$C");
+    }
+    let mut out = Vec::new();
+    for l in &p.lines {
+        let a = send(&mut s, l);
+        let refused = a.last().is_some_and(|l| l.starts_with("error:"));
+        out.push(a);
+        if refused {
+            break; // the recording ends at the first refusal
+        }
+    }
+    out
+}
+
+/// Programs of G-code alone (what a job holds).
+fn gcode_only(p: &Program) -> bool {
+    !p.lines.iter().any(|l| l.trim_start().starts_with('$'))
+}
+
+/// The first error's code and line in GRBL's answers, if any.
+fn first_error(out: &[Vec<String>]) -> Option<(usize, String)> {
+    out.iter().enumerate().find_map(|(k, a)| {
+        a.last()
+            .filter(|l| l.starts_with("error:"))
+            .map(|l| (k + 1, l.clone()))
+    })
+}
+
+struct Tally {
+    name: &'static str,
+    total: usize,
+    wrong: BTreeMap<String, Vec<String>>,
+}
+
+impl Tally {
+    fn new(name: &'static str) -> Tally {
+        Tally { name, total: 0, wrong: BTreeMap::new() }
+    }
+    fn judge(&mut self, p: &Program, ok: bool, what: impl FnOnce() -> String) {
+        self.total += 1;
+        if !ok {
+            self.wrong.entry(p.family.clone()).or_default().push(what());
+        }
+    }
+    fn share(&self) -> f64 {
+        let bad: usize = self.wrong.values().map(Vec::len).sum();
+        1.0 - bad as f64 / self.total as f64
+    }
+    /// The rate, and the disagreements by family.
+    fn report(&self) -> String {
+        let mut s = format!(
+            "{}: {:.2}% of {} programs agree\n",
+            self.name,
+            100.0 * self.share(),
+            self.total
+        );
+        for (f, v) in &self.wrong {
+            s += &format!("  {f}: {}\n", v.len());
+            for w in v.iter().take(4) {
+                s += &format!("    {w}\n");
+            }
+        }
+        s
+    }
+}
+
+fn show(lines: &[String]) -> String {
+    lines.join(" | ")
+}
+
+#[test]
+fn the_corpus_is_large_and_covers_grbls_families() {
+    let c = corpus();
+    assert!(c.len() >= 3000, "{} programs", c.len());
+    let families: std::collections::BTreeSet<&str> = c.iter().map(|p| p.family.as_str()).collect();
+    assert!(families.len() >= 40, "{} families", families.len());
+    let refused = c.iter().filter(|p| first_error(&p.out).is_some()).count();
+    assert!(refused >= 1000, "{refused} refused programs");
+}
+
+#[test]
+fn the_simulated_grbl_answers_as_grbl_1_1h() {
+    let mut verdicts = Tally::new("relievo grbl-sim, verdict");
+    let mut bytes = Tally::new("relievo grbl-sim, every line byte for byte");
+    for p in corpus() {
+        let got = through_sim(&p, false);
+        let (g, w) = (verdict(&got), verdict(&p.out));
+        verdicts.judge(&p, g == w, || format!("{:?}: {g}, GRBL {w}", p.lines));
+        bytes.judge(&p, got == p.out, || {
+            let k = got.iter().zip(&p.out).position(|(a, b)| a != b).unwrap_or(got.len().min(p.out.len()));
+            format!(
+                "{:?} line {}: '{}', GRBL '{}'",
+                p.lines,
+                k + 1,
+                got.get(k).map_or("-".into(), |l| show(l)),
+                p.out.get(k).map_or("-".into(), |l| show(l))
+            )
+        });
+    }
+    println!("{}\n{}", verdicts.report(), bytes.report());
+    assert!(verdicts.share() >= 0.999, "{}", verdicts.report());
+}
+
+#[test]
+fn check_mode_and_the_program_reader_judge_as_grbl_1_1h() {
+    let mut check = Tally::new("send --check-only (check mode)");
+    let mut reader = Tally::new("simulate (program reader)");
+    for p in corpus().iter().filter(|p| gcode_only(p)) {
+        let want = first_error(&p.out);
+        let got = first_error(&through_sim(p, true));
+        check.judge(p, got == want, || format!("{:?}: {got:?}, GRBL {want:?}", p.lines));
+        let text: String = p.lines.iter().map(|l| format!("{l}\n")).collect();
+        let read = match relievo::gcode::program(&text) {
+            Ok(_) => None,
+            Err(e) => {
+                let e = e.0;
+                // "line N: GRBL error:C ..."
+                let n = e
+                    .strip_prefix("line ")
+                    .and_then(|r| r.split(':').next())
+                    .and_then(|n| n.parse::<usize>().ok());
+                let code = e.split_whitespace().find(|w| w.starts_with("error:")).map(str::to_string);
+                n.zip(code)
+            }
+        };
+        reader.judge(p, read == want, || format!("{:?}: {read:?}, GRBL {want:?}", p.lines));
+    }
+    println!("{}\n{}", check.report(), reader.report());
+    assert!(check.share() >= 0.995, "{}", check.report());
+    assert!(reader.share() >= 0.995, "{}", reader.report());
+}
