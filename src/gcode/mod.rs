@@ -5,6 +5,7 @@
 pub mod emit;
 pub mod modal;
 pub mod parse;
+pub mod planner;
 
 use crate::bail;
 use crate::dialect::arc;

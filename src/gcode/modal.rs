@@ -146,12 +146,19 @@ const VALUE_WORDS: &str = "FIJKLNPRSTXYZ";
 /// A float to an integer as GRBL's C does on the host it was recorded on
 /// (x86 cvttsd2si): truncated, and out of the int32 range the "integer
 /// indefinite" i32::MIN; narrower C types then keep the low bits.
-fn c_int(x: f64) -> i32 {
+pub fn c_int(x: f64) -> i32 {
     if x.is_nan() || x >= 2_147_483_648.0 || x <= -2_147_483_649.0 {
         i32::MIN
     } else {
         x.trunc() as i32
     }
+}
+
+/// How long GRBL dwells for G4 P`p`: whole 50 ms steps, counted in 16
+/// bits (delay_sec), so P0.12 waits 0.15 s and P4095 wraps to 818.2 s.
+pub fn dwell_seconds(p: f64) -> f64 {
+    let steps = c_int(((20.0f32 * p as f32) as f64).ceil()) as u16;
+    steps as f64 * 0.05
 }
 
 /// A G or M word's number as GRBL splits it: the integer in 8 bits (so
@@ -680,7 +687,7 @@ impl Modal {
         self.tool = if b.has('T') { b.v('T') as u32 } else { 0 };
         step.sync |= self.spindle != old.spindle || self.coolant != old.coolant;
         if b.non_modal == Some(4) {
-            step.dwell = Some(b.v('P'));
+            step.dwell = Some(dwell_seconds(b.v('P')));
             step.sync = true;
         }
         if let Some(on) = b.tool_length {

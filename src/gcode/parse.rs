@@ -22,7 +22,47 @@ pub struct Line {
     pub bad: Option<u32>,
 }
 
-/// Remove comments and whitespace: what GRBL's line buffer will hold.
+/// GRBL's protocol loop reading a line byte by byte (protocol.c): spaces,
+/// control characters, '/' and comments dropped, letters upper-cased, at
+/// most `LINE_MAX` characters kept (then the line overflows: error:11).
+/// Bytes are kept one char each (Latin-1), as GRBL keeps them.
+#[derive(Clone, Debug, Default)]
+pub struct LineFilter {
+    held: Vec<u8>,
+    paren: bool,
+    semicolon: bool,
+    overflow: bool,
+}
+
+impl LineFilter {
+    /// One byte; at a line's end ('\n' or '\r', each its own end), the
+    /// line as GRBL's buffer holds it, or error:11.
+    pub fn push(&mut self, c: u8) -> Option<std::result::Result<String, u32>> {
+        if c == b'\n' || c == b'\r' {
+            let line = self.held.iter().map(|&b| b as char).collect();
+            let overflow = self.overflow;
+            *self = LineFilter::default();
+            return Some(if overflow { Err(11) } else { Ok(line) });
+        }
+        if self.paren || self.semicolon || self.overflow {
+            if c == b')' {
+                self.paren = false;
+            }
+            return None;
+        }
+        match c {
+            c if c <= b' ' || c == b'/' => {}
+            b'(' => self.paren = true,
+            b';' => self.semicolon = true,
+            _ if self.held.len() >= LINE_MAX => self.overflow = true,
+            c => self.held.push(c.to_ascii_uppercase()),
+        }
+        None
+    }
+}
+
+/// Remove comments and whitespace: what GRBL's line buffer will hold
+/// (not cut at its length).
 pub fn strip(line: &str) -> String {
     split(line).0
 }
@@ -56,7 +96,7 @@ fn split(line: &str) -> (String, Vec<String>) {
 /// float: the first 8 digits as an integer, scaled by tens in single
 /// precision as GRBL scales them, so that every later test (an integer
 /// command, a negative word, a radius) sees the number GRBL sees.
-fn read_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
+pub fn read_number(b: &[u8], mut i: usize) -> Option<(f64, usize)> {
     let negative = match b.get(i) {
         Some(b'-') => {
             i += 1;
