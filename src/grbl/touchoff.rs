@@ -112,10 +112,18 @@ fn touch(r: &mut Replies, travel: f64, feed: f64) -> Result<DVec3> {
         .ok_or_else(|| crate::Error("touch-off: no [PRB:] report after G38.2".into()))
 }
 
+/// Wait until the moves sent have run: G4 P0 is answered once GRBL's
+/// planner is empty.
+fn settle(r: &mut Replies) -> Result<()> {
+    exchange(r, "G4P0", 300.0).map(|_| ())
+}
+
 /// What lies between machine Z and work Z besides the active system's
 /// offset: the G92 offset and the tool length offset (from `$#`); and the
 /// active system's own Z offset (from `$G` and `$#`).
 fn offsets(r: &mut Replies) -> Result<(f64, f64)> {
+    // GRBL answers `$#` only standing (error:8 in motion)
+    settle(r)?;
     let params = exchange(r, "$#", 5.0)?;
     let g92 = report_triple(&params, "G92").unwrap_or(DVec3::ZERO);
     let tlo = params
@@ -172,7 +180,8 @@ pub fn touch_off(r: &mut Replies, t: &TouchOff, job: Option<&Modal>) -> Result<(
     if job.is_some_and(|m| !m.absolute) {
         exchange(r, "G91", 5.0)?;
     }
-    Ok(())
+    // the machine standing when it returns
+    settle(r)
 }
 
 /// Up to the setter's Z, over it, touch it; back up. Returns the
