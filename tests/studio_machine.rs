@@ -129,6 +129,8 @@ fn a_carver_drives_the_machine_from_the_page() {
         held[0] > held[2] + 60.0 && held[1] > held[2] + 30.0,
         "the Hold badge is amber: {held:?}"
     );
+    // Hold:1 brakes along the path, as GRBL does; Hold:0 stands
+    wait_text(&b, "#m-state", "Hold:0", |t| t == "Hold:0");
     let x_held = b.text("#m-wx");
     std::thread::sleep(std::time::Duration::from_millis(800));
     assert_eq!(b.text("#m-wx"), x_held, "held means standing");

@@ -43,6 +43,11 @@ impl SimGrbl {
         }
     }
 
+    /// The machine's speed now, mm/s (0 standing).
+    pub(super) fn speed_now(&self) -> f64 {
+        self.head_progress().map_or(0.0, |(_, v)| v)
+    }
+
     /// A feed hold ('!'): the running block is cut where the machine will
     /// stand, braking from the speed it has; the rest of it waits, with
     /// its line, for cycle start. A hold near a block's end stops at that

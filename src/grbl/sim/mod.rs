@@ -588,16 +588,17 @@ impl SimGrbl {
 
     fn status(&mut self) -> String {
         let state = self.state();
-        let p = self.done;
+        // where the machine is and how fast it goes now, as GRBL reports
+        // them: its position mid-move, its actual feed (0 standing)
+        let p = self.position();
+        let speed = self.speed_now() * 60.0;
         let mut s = format!(
-            "<{state}|MPos:{:.3},{:.3},{:.3}|Bf:{},{}|FS:{},{}",
-            p.x,
-            p.y,
-            p.z,
+            "<{state}|MPos:{}|Bf:{},{}|FS:{},{}",
+            self.coords(p),
             PLANNER_BLOCKS.saturating_sub(self.planner.len()),
             self.rx_size - self.rx.len(),
-            self.modal.feed.unwrap_or(0.0).round(),
-            self.spindle.round()
+            self.rate(speed),
+            settings::grbl_float(self.spindle as f32, 0)
         );
         // as GRBL: the work offset when it changed, else every tenth report
         let wco = self.modal.wco();
@@ -1102,10 +1103,16 @@ mod tests {
         // (the look-ahead plans a stop after the last move): 1.0125 s
         send(&mut s, "G1 X10 F600\nG1 X20\n");
         assert!(send(&mut s, "?").starts_with("<Run"));
+        // reports give the position mid-move and the speed there: 0.125
+        // mm up to speed in 0.025 s, then 10 mm/s
         s.advance(1.0);
-        assert!(send(&mut s, "?").contains("MPos:0.000"));
+        let st = send(&mut s, "?");
+        assert!(
+            st.contains("MPos:9.875,") && st.contains("|FS:600,"),
+            "{st}"
+        );
         s.advance(1.5);
-        assert!(send(&mut s, "?").contains("MPos:10.000"));
+        assert!(send(&mut s, "?").contains("MPos:14.875,"));
         s.advance(2.02);
         assert!(send(&mut s, "?").starts_with("<Run"));
         s.advance(2.03);
