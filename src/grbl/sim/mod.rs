@@ -131,12 +131,6 @@ pub struct SimGrbl {
     bytes_in: usize,
     pub faults: Faults,
     pub disconnected: bool,
-    travel: DVec3,
-    max_rate: DVec3,
-    steps: DVec3,
-    /// mm/s^2 per axis, and GRBL's junction deviation ($11), mm.
-    accel: DVec3,
-    junction: f64,
     /// Direction of the last queued move.
     last_dir: Option<DVec3>,
     /// When the head block started, and the speed the last completed
@@ -202,11 +196,6 @@ impl SimGrbl {
             bytes_in: 0,
             faults: Faults::default(),
             disconnected: false,
-            travel: DVec3::new(m.travel.x, m.travel.y, m.travel.z),
-            max_rate: DVec3::new(m.max_rate.x, m.max_rate.y, m.max_rate.z),
-            steps: DVec3::new(m.steps_per_mm.x, m.steps_per_mm.y, m.steps_per_mm.z),
-            accel: DVec3::new(m.acceleration.x, m.acceleration.y, m.acceleration.z),
-            junction: m.junction_deviation,
             last_dir: None,
             head_start: 0.0,
             exit_speed: 0.0,
@@ -537,18 +526,6 @@ impl SimGrbl {
         self.say("[MSG:Sleeping]");
     }
 
-    /// The settings' rates, accelerations, travel and junction deviation
-    /// into the planner's terms.
-    fn sync_settings(&mut self) {
-        let s = &self.settings;
-        let v = |f: &dyn Fn(usize) -> f64| DVec3::new(f(0), f(1), f(2));
-        self.travel = v(&|k| s.travel(k));
-        self.max_rate = v(&|k| s.max_rate[k] as f64);
-        self.steps = v(&|k| s.steps[k] as f64);
-        self.accel = v(&|k| s.acceleration(k));
-        self.junction = s.junction();
-    }
-
     /// Soft reset: buffers and planner cleared; a reset in motion raises
     /// ALARM:3 as GRBL does.
     pub fn reset(&mut self) {
@@ -845,25 +822,26 @@ impl SimGrbl {
         let d = target - from;
         let dist = d.length();
         // GRBL plans in whole steps and drops a block of none
-        if (from * self.steps).round() == (target * self.steps).round() {
+        let steps = self.settings.steps_mm();
+        if (from * steps).round() == (target * steps).round() {
             return self.note(line);
         }
         let u = d / dist;
         // the slowest axis' rate and acceleration along the move
         let along = |lim: DVec3| planner::along(u, lim);
-        let top = along(self.max_rate) / 60.0;
+        let top = along(self.settings.rates()) / 60.0;
         let rapid = self.modal.motion == 0 && jog.is_none();
         let v = match jog {
             Some(f) => (f / 60.0).min(top),
             None if rapid => top,
             None => (self.modal.feed.unwrap_or(1.0) / 60.0).min(top),
         };
-        let a = along(self.accel);
+        let a = along(self.settings.accels());
         // a move queued behind others may enter as fast as its corner
         // allows; one queued on an idle machine starts from rest
         let max_entry = match (self.planner.back(), self.last_dir) {
             (Some(prev), Some(dir)) => {
-                planner::junction_speed(dir, u, a.min(prev.a), self.junction)
+                planner::junction_speed(dir, u, a.min(prev.a), self.settings.junction())
             }
             _ => 0.0,
         };

@@ -90,10 +90,7 @@ impl SimGrbl {
             (contact(q) != probe.away || self.plate.is_some_and(|p| p.under(q))).then_some(q)
         });
         let feed = self.modal.feed.unwrap_or(1.0) / 60.0;
-        let a = (0..3)
-            .filter(|&k| u[k] != 0.0)
-            .map(|k| self.accel[k] / u[k].abs())
-            .fold(f64::INFINITY, f64::min);
+        let a = crate::gcode::planner::along(u, self.settings.accels());
         let stop = match touched {
             Some(q) => {
                 let run = (q - from).length();

@@ -3,6 +3,7 @@
 //! precision, acceleration held in mm/min², travel held negative).
 
 use crate::machine::Machine;
+use glam::DVec3;
 
 /// GRBL's printFloat: `decimals` places, rounded by adding a half in
 /// single precision and truncating, as the firmware prints every number.
@@ -55,8 +56,8 @@ pub struct Settings {
     ints: [u8; 33],
     /// $11, $12, $24, $25, $27, $30, $31, as stored.
     floats: [f32; 33],
-    pub steps: [f32; 3],
-    pub max_rate: [f32; 3],
+    steps: [f32; 3],
+    max_rate: [f32; 3],
     /// mm/min², as GRBL holds it.
     accel: [f32; 3],
     /// Negative, as GRBL holds it.
@@ -99,6 +100,25 @@ impl Settings {
         s
     }
 
+    /// Steps per mm per axis ($100-$102).
+    pub fn steps_mm(&self) -> DVec3 {
+        DVec3::from(self.steps.map(f64::from))
+    }
+
+    /// Top rate per axis, mm/min ($110-$112).
+    pub fn rates(&self) -> DVec3 {
+        DVec3::from(self.max_rate.map(f64::from))
+    }
+
+    /// Acceleration per axis, mm/s² ($120-$122).
+    pub fn accels(&self) -> DVec3 {
+        DVec3::new(
+            self.acceleration(0),
+            self.acceleration(1),
+            self.acceleration(2),
+        )
+    }
+
     pub fn junction(&self) -> f64 {
         self.floats[11] as f64
     }
@@ -108,13 +128,8 @@ impl Settings {
     }
 
     /// mm/s² per axis.
-    pub fn acceleration(&self, axis: usize) -> f64 {
+    fn acceleration(&self, axis: usize) -> f64 {
         (self.accel[axis] / (60.0 * 60.0)) as f64
-    }
-
-    /// mm per axis ($130-$132).
-    pub fn travel(&self, axis: usize) -> f64 {
-        -self.travel[axis] as f64
     }
 
     pub fn soft_limits(&self) -> bool {

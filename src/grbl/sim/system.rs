@@ -115,9 +115,6 @@ impl SimGrbl {
                 if at(2) != 0 {
                     return Err(3);
                 }
-                if !self.planner.is_empty() {
-                    return Err(8);
-                }
                 self.alarm = None;
                 self.done = DVec3::ZERO;
                 self.modal.pos = DVec3::ZERO;
@@ -157,7 +154,6 @@ impl SimGrbl {
                     }
                     _ => return Err(3),
                 }
-                self.sync_settings();
                 self.say("[MSG:Restoring defaults]");
                 self.say("ok");
                 self.reset();
@@ -205,7 +201,6 @@ impl SimGrbl {
                 }
                 let k = super::c_int(n as f64) as u8;
                 self.settings.store(k, value)?;
-                self.sync_settings();
             }
         }
         Ok(true)

@@ -6,8 +6,9 @@ gc_execute_line on the host, with a fresh EEPROM holding GRBL's defaults,
 and every line's answer is kept as GRBL printed it.
 
 Usage: generate.py [--grbl DIR] [--seed N] [--out FILE]
-  --grbl DIR  a firmware built by ../shared/peers/grbl/build.sh DIR (built
-              into a scratch folder when not given)
+  --grbl DIR  a built GRBL 1.1h (DIR/grbl-sim/grbl_sim.exe and its objects);
+              by default the one the firmware tests build,
+              target/tmp/grbl-firmware (`cargo test --release --test firmware`)
 Only the standard library; deterministic for a given seed.
 """
 import argparse
@@ -285,26 +286,28 @@ def fam_comments(r):
     return start(r), r.choice(forms)
 
 
-def fam_units(r):
-    pre = ["G20", "G90 G0 X0 Y0 Z0"] if r.random() < 0.7 else ["G21"]
-    g = r.choice(["G0", "G1", "G2", "G3", "G1", "G28", "G92", "G10 L20 P1", "G43.1"])
-    body = "%s %s" % (g, axes(r, lo=-2, hi=2))
+def move_in_mode(r, pre, moves, span, ij):
+    """A prelude that sets a mode, then a move of `moves` within `span`
+    mm (arcs with I, J within `ij`, feeds with F)."""
+    g = r.choice(moves)
+    body = "%s %s" % (g, axes(r, lo=-span, hi=span))
     if g in ("G2", "G3"):
-        body += " I%s J%s" % (num(r, -1, 1), num(r, -1, 1))
+        body += " I%s J%s" % (num(r, -ij, ij), num(r, -ij, ij))
     if g in ("G1", "G2", "G3"):
         body += " F" + num(r, 1, 100)
     return pre, body
+
+
+def fam_units(r):
+    pre = ["G20", "G90 G0 X0 Y0 Z0"] if r.random() < 0.7 else ["G21"]
+    moves = ["G0", "G1", "G2", "G3", "G1", "G28", "G92", "G10 L20 P1", "G43.1"]
+    return move_in_mode(r, pre, moves, 2, 1)
 
 
 def fam_relative(r):
     pre = ["G90 G0 X0 Y0 Z0", "G91"] + (["G91.1"] if r.random() < 0.4 else [])
-    g = r.choice(["G0", "G1", "G2", "G3", "G28", "G30", "G53", "G10 L20 P1", "G92"])
-    body = "%s %s" % (g, axes(r, lo=-10, hi=10))
-    if g in ("G2", "G3"):
-        body += " I%s J%s" % (num(r, -5, 5), num(r, -5, 5))
-    if g in ("G1", "G2", "G3"):
-        body += " F" + num(r, 1, 100)
-    return pre, body
+    moves = ["G0", "G1", "G2", "G3", "G28", "G30", "G53", "G10 L20 P1", "G92"]
+    return move_in_mode(r, pre, moves, 10, 5)
 
 
 def fam_inverse_time(r):
@@ -518,6 +521,15 @@ def validator_on_defaults(grbl, scratch):
     return exe
 
 
+def firmware_dir(given):
+    """The built firmware: `given`, else the firmware tests' build."""
+    grbl = given or os.path.join(HERE, "../../../target/tmp/grbl-firmware")
+    if not os.path.exists(os.path.join(grbl, "grbl-sim", "grbl_sim.exe")):
+        sys.exit("no GRBL 1.1h built at %s: run `cargo test --release --test firmware` "
+                 "(it builds one there), or give --grbl DIR" % grbl)
+    return os.path.abspath(grbl)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--grbl")
@@ -526,12 +538,7 @@ def main():
     a = ap.parse_args()
     scratch = tempfile.mkdtemp(prefix="conformance-")
     try:
-        grbl = a.grbl
-        if not grbl:
-            build = os.path.join(HERE, "../../../../shared/peers/grbl/build.sh")
-            grbl = os.path.join(scratch, "fw")
-            subprocess.run(["bash", build, grbl], check=True)
-        gvalidate = validator_on_defaults(os.path.abspath(grbl), scratch)
+        gvalidate = validator_on_defaults(firmware_dir(a.grbl), scratch)
         run = os.path.join(scratch, "run")
         os.makedirs(run)
         r = random.Random(a.seed)

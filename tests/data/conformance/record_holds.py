@@ -7,8 +7,8 @@ acts on the hold); the machine then decelerates along its path, and the
 report once it stands in Hold:0 is where it stopped.
 
 Usage: record_holds.py [--grbl DIR] [--out FILE]
-  --grbl DIR  a firmware built by ../shared/peers/grbl/build.sh DIR (built
-              into a scratch folder when not given)
+  --grbl DIR  a built GRBL 1.1h, as for generate.py (by default the one
+              the firmware tests build, target/tmp/grbl-firmware)
 grbl_sim.exe runs in real time: about 10 s a scenario. Run it on a quiet
 host (its two threads spin).
 """
@@ -23,6 +23,8 @@ import sys
 import tempfile
 import threading
 import time
+
+from generate import firmware_dir
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -103,25 +105,16 @@ def main():
     ap.add_argument("--grbl")
     ap.add_argument("--out", default=os.path.join(HERE, "holds.jsonl"))
     a = ap.parse_args()
-    scratch = tempfile.mkdtemp(prefix="holds-")
-    try:
-        grbl = a.grbl
-        if not grbl:
-            grbl = os.path.join(scratch, "fw")
-            subprocess.run(["bash", os.path.join(HERE, "../../../../shared/peers/grbl/build.sh"), grbl],
-                           check=True)
-        exe = os.path.join(os.path.abspath(grbl), "grbl-sim", "grbl_sim.exe")
-        out = []
-        for line, axis, at in SCENARIOS:
-            r = record(exe, line, axis, at)
-            print(r, file=sys.stderr)
-            out.append(r)
-        with open(a.out, "w") as f:
-            for r in out:
-                f.write(json.dumps(r) + "\n")
-        print("%d holds -> %s" % (len(out), a.out))
-    finally:
-        shutil.rmtree(scratch, ignore_errors=True)
+    exe = os.path.join(firmware_dir(a.grbl), "grbl-sim", "grbl_sim.exe")
+    out = []
+    for line, axis, at in SCENARIOS:
+        r = record(exe, line, axis, at)
+        print(r, file=sys.stderr)
+        out.append(r)
+    with open(a.out, "w") as f:
+        for r in out:
+            f.write(json.dumps(r) + "\n")
+    print("%d holds -> %s" % (len(out), a.out))
 
 
 if __name__ == "__main__":
