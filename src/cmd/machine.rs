@@ -65,23 +65,31 @@ pub fn run(args: MachineArgs) -> relievo::Result<()> {
     let lines = match args.action {
         // read-only: no handshake, so no soft reset of a board that is
         // running or holding; '?' again until a report comes (a board
-        // that resets on connection answers once it has booted)
+        // that resets on connection answers once it has booted), then
+        // until the work offset and the overrides have come, which GRBL
+        // sends only every few reports
         MachineAction::Status => {
-            let mut got = Vec::new();
+            let mut got: Vec<String> = Vec::new();
             let until = r.port.now() + 2.5;
             let mut asked = f64::MIN;
-            while r.port.now() < until && !got.iter().any(|l: &String| l.starts_with('<')) {
-                if r.port.now() - asked >= 0.5 {
+            let has =
+                |got: &[String], f: &str| got.iter().any(|l| l.starts_with('<') && l.contains(f));
+            while r.port.now() < until && !(has(&got, "|WCO:") && has(&got, "|Ov:")) {
+                let gap = if has(&got, "") { 0.05 } else { 0.5 };
+                if r.port.now() - asked >= gap {
                     r.port.write_all(b"?")?;
                     asked = r.port.now();
                 }
-                if let Some(l) = r.next(0.1)? {
+                if let Some(l) = r.next(0.05)? {
                     got.push(l);
                 }
             }
-            if !got.iter().any(|l| l.starts_with('<')) {
+            let Some(whole) = relievo::grbl::sender::whole_report(got.iter().map(String::as_str))
+            else {
                 relievo::bail!("{}: no status report within 2.5 s of '?'", args.port);
-            }
+            };
+            got.retain(|l| !l.starts_with('<'));
+            got.push(whole);
             got
         }
         MachineAction::Reset => {

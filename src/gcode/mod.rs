@@ -163,27 +163,13 @@ pub fn program_at(text: &str, start: Option<DVec3>) -> Result<Program> {
             p.dwells.push((n, d));
         }
         let Some(target) = step.to else { continue };
-        let (mut pos, motion) = (step.from, step.motion);
+        let (pos, motion) = (step.from, step.motion);
         let kind = if motion == 0 { Kind::Rapid } else { Kind::Feed };
-        let f = match kind {
-            Kind::Rapid => 0.0,
-            Kind::Feed => modal.feed.unwrap_or(0.0),
-        };
-        let mut push = |a: DVec3, b: DVec3, stop_before: &mut bool| {
-            p.segments.push(Segment {
-                line: n,
-                kind,
-                a,
-                b,
-                feed: f,
-                stop_before: *stop_before,
-            });
-            *stop_before = false;
-        };
-        // G28/G30: by the point given, then to the stored one
+        // the points the move goes through: G28/G30 by the point given,
+        // an arc by GRBL's chords
+        let mut path = vec![pos];
         if let Some(via) = step.via.filter(|&v| v != pos) {
-            push(pos, via, &mut stop);
-            pos = via;
+            path.push(via);
         }
         match step.arc {
             Some(a) => {
@@ -193,14 +179,34 @@ pub fn program_at(text: &str, start: Option<DVec3>) -> Result<Program> {
                         a.radius
                     );
                 }
-                let mut from = pos;
-                for q in a.points(pos, target, arc::GRBL_ARC_TOLERANCE) {
-                    push(from, q, &mut stop);
-                    from = q;
-                }
+                let from = *path.last().unwrap();
+                path.extend(a.points(from, target, arc::GRBL_ARC_TOLERANCE));
             }
-            None if target != pos => push(pos, target, &mut stop),
-            None => {}
+            None => path.push(target),
+        }
+        path.dedup();
+        // G93: F is 1/min, a line in 1/F minutes; GRBL's mc_arc plans an
+        // arc's chords at F times their count, in mm/min
+        let f = match kind {
+            Kind::Rapid => 0.0,
+            Kind::Feed if modal.inverse_time && step.arc.is_some() => {
+                modal.feed.unwrap_or(0.0) * (path.len() - 1) as f64
+            }
+            Kind::Feed if modal.inverse_time => {
+                modal.feed.unwrap_or(0.0) * (path[path.len() - 1] - path[0]).length()
+            }
+            Kind::Feed => modal.feed.unwrap_or(0.0),
+        };
+        for w in path.windows(2) {
+            p.segments.push(Segment {
+                line: n,
+                kind,
+                a: w[0],
+                b: w[1],
+                feed: f,
+                stop_before: stop,
+            });
+            stop = false;
         }
     }
     Ok(p)
@@ -209,6 +215,21 @@ pub fn program_at(text: &str, start: Option<DVec3>) -> Result<Program> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// G93: a feed move takes 1/F minutes; an arc's chords go at F times
+    /// their count, as GRBL's mc_arc plans them.
+    #[test]
+    fn inverse_time_feeds_take_one_over_f_minutes() {
+        let p = program("G21 G90 G0 X0 Y0 Z0\nG93 G1 X30 F2\nG2 X50 Y0 I10 F6\nG94 G1 X0 F600\n")
+            .unwrap();
+        let s = &p.segments;
+        assert!((s[0].feed - 60.0).abs() < 1e-9, "{}", s[0].feed);
+        let arc: Vec<_> = s.iter().filter(|g| g.line == 3).collect();
+        let len: f64 = arc.iter().map(|g| (g.b - g.a).length()).sum();
+        assert!(arc.len() > 5 && (len - 31.4).abs() < 0.1, "{len}");
+        assert!(arc.iter().all(|g| g.feed == 6.0 * arc.len() as f64));
+        assert_eq!(s.last().unwrap().feed, 600.0);
+    }
 
     #[test]
     fn modal_state_units_and_increments() {

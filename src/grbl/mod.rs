@@ -86,6 +86,9 @@ pub const SOFT_RESET: u8 = 0x18;
 pub const JOG_CANCEL: u8 = 0x85;
 /// Toggles the spindle off while in feed hold.
 pub const SPINDLE_STOP: u8 = 0x9e;
+/// The safety door opened: a hold that turns the spindle and coolant off
+/// and restores them (after 4 s of spindle) at cycle start.
+pub const SAFETY_DOOR: u8 = 0x84;
 
 #[cfg(test)]
 mod tests {

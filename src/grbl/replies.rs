@@ -148,6 +148,43 @@ impl Status {
     }
 }
 
+/// The latest of `reports` made whole: GRBL gives the work offset and the
+/// overrides (with `A:`) only every few reports, so those fields come
+/// from the latest report that had them.
+pub fn whole_report<'a>(reports: impl IntoIterator<Item = &'a str>) -> Option<String> {
+    let (mut last, mut wco, mut ov) = (None, None, None);
+    for r in reports.into_iter().filter(|r| r.starts_with('<')) {
+        let body = r.trim_start_matches('<').trim_end_matches('>');
+        let fields: Vec<&str> = body.split('|').collect();
+        if let Some(w) = fields.iter().find(|f| f.starts_with("WCO:")) {
+            wco = Some(w.to_string());
+        }
+        if let Some(k) = fields.iter().position(|f| f.starts_with("Ov:")) {
+            ov = Some(
+                fields[k..]
+                    .iter()
+                    .filter(|f| f.starts_with("Ov:") || f.starts_with("A:"))
+                    .copied()
+                    .collect::<Vec<_>>()
+                    .join("|"),
+            );
+        }
+        last = Some(
+            fields
+                .iter()
+                .filter(|f| !f.starts_with("WCO:") && !f.starts_with("Ov:") && !f.starts_with("A:"))
+                .copied()
+                .collect::<Vec<_>>()
+                .join("|"),
+        );
+    }
+    let mut out = last?;
+    for f in [wco, ov].into_iter().flatten() {
+        out = out + "|" + &f;
+    }
+    Some(format!("<{out}>"))
+}
+
 /// The first `N` comma-separated numbers of a field (GRBL built with
 /// more axes sends more).
 fn numbers<T: std::str::FromStr + Copy + Default, const N: usize>(v: &str) -> Option<[T; N]> {
@@ -191,4 +228,25 @@ pub fn parse_status(l: &str) -> Option<Status> {
         }
     }
     Some(st)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reports_are_made_whole() {
+        let r = whole_report([
+            "<Idle|MPos:1.000,0.000,0.000|FS:0,0|WCO:1.000,2.000,3.000>",
+            "<Idle|MPos:1.000,0.000,0.000|FS:0,1000|Ov:100,50,120|A:SF>",
+            "<Run|MPos:2.000,0.000,0.000|FS:300,1000>",
+        ]);
+        assert_eq!(
+            r.as_deref(),
+            Some(
+                "<Run|MPos:2.000,0.000,0.000|FS:300,1000|WCO:1.000,2.000,3.000|Ov:100,50,120|A:SF>"
+            )
+        );
+        assert_eq!(whole_report(["ok"]), None);
+    }
 }

@@ -5,7 +5,7 @@
 //! own modules, named here too.
 
 pub use super::lines::{job_lines, load_job, JobLine};
-pub use super::replies::{parse_status, Replies, Status};
+pub use super::replies::{parse_status, whole_report, Replies, Status};
 use super::state::State;
 pub use super::stream::stream;
 pub use super::touchoff::{touch_off, Routine, Setter, TouchOff};

@@ -129,6 +129,11 @@ struct Stream<'a> {
     keys: Keys,
     /// The last status report said Hold.
     holding: bool,
+    /// Status reports in a row saying Idle with every line sent answered.
+    /// GRBL can say Idle once with moves still queued (a report and the
+    /// cycle start due in the same pass of its realtime loop print the
+    /// report first), never twice.
+    idle_reports: u32,
 }
 
 /// Stream `lines` (with `preamble` lines sent first, unjournaled).
@@ -210,6 +215,7 @@ impl<'a> Stream<'a> {
             ),
             keys: Keys::new(opts.keys && !check_mode),
             holding: false,
+            idle_reports: 0,
         })
     }
 
@@ -329,6 +335,7 @@ impl<'a> Stream<'a> {
             batch.push(b'\n');
             self.out.bytes += len;
             self.inflight.push_back((self.next, len));
+            self.idle_reports = 0;
             self.used += len;
             if !self.check_mode && item.job.is_some_and(|k| self.lines[k].pause) {
                 self.phase = Phase::AtPause {
@@ -448,8 +455,13 @@ impl<'a> Stream<'a> {
         // the page's pause stands Idle before the M0, the terminal's in
         // the M0's Hold
         let page = self.page_pauses();
+        if self.inflight.is_empty() && st.state == State::Idle {
+            self.idle_reports += 1;
+        } else {
+            self.idle_reports = 0;
+        }
         let standing = if page {
-            self.inflight.is_empty() && st.state == State::Idle
+            self.idle_reports >= 2
         } else {
             matches!(st.state, State::Hold(_))
         };

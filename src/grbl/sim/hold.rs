@@ -1,10 +1,14 @@
-//! A feed hold as GRBL 1.1h makes one: the motion its stepper segment
+//! GRBL 1.1h's suspends: a feed hold (the motion its stepper segment
 //! buffer already holds runs on, then the machine decelerates along its
 //! path at the move's acceleration and stands in Hold:0; cycle start goes
-//! on from there, from rest.
+//! on from there, from rest), a jog cancel (the same braking, then the
+//! jog is dropped), the safety door (a hold that turns the spindle and
+//! coolant off, and restores them at cycle start) and the spindle stop
+//! override in a hold. GRBL's main loop takes no line while one holds it.
 
 use super::{SimGrbl, TipMove};
 use crate::gcode::planner;
+use crate::grbl::state::State;
 use glam::DVec3;
 
 /// Motion GRBL has already cut into step segments when a hold comes: its
@@ -13,6 +17,11 @@ use glam::DVec3;
 /// 9 holds recorded on the firmware (tests/data/conformance/holds.jsonl)
 /// braking began 43-49 ms after the hold.
 const SEGMENT_LAG: f64 = 0.045;
+
+/// config.h: the spindle's and the coolant's time to come back up after
+/// the door (SAFETY_DOOR_SPINDLE_DELAY, SAFETY_DOOR_COOLANT_DELAY).
+const DOOR_SPINDLE_DELAY: f64 = 4.0;
+const DOOR_COOLANT_DELAY: f64 = 1.0;
 
 impl SimGrbl {
     /// How far along the running head block the machine is, and how fast
@@ -93,15 +102,143 @@ impl SimGrbl {
     }
 
     /// The braking block ended: the machine stands, held, and what is
-    /// left is planned from rest for when cycle start comes.
+    /// left is planned from rest for when cycle start comes (a jog
+    /// cancelled: dropped; a door: the spindle and coolant go off).
     pub(super) fn end_brake(&mut self) {
         self.braking = false;
         self.exit_speed = 0.0;
+        if std::mem::take(&mut self.jog_cancel) {
+            self.planner.clear();
+            self.last_dir = None;
+            self.modal.pos = self.done;
+            return self.pump();
+        }
+        if self.door {
+            self.set_spindle(false);
+            self.set_coolant(false);
+        }
         if self.planner.is_empty() {
             self.held_left = Some(0.0);
         } else {
             self.start_head();
             self.held_left = Some(self.block_end - self.now);
+        }
+    }
+}
+
+impl SimGrbl {
+    /// '!': a hold, as GRBL takes it in each state (none in an alarm, in
+    /// check mode or behind a door; a jog is cancelled). Standing, the
+    /// machine holds at once, a dwell with it.
+    pub(super) fn feed_hold(&mut self) {
+        if self.alarm.is_some() || self.check || self.door || self.asleep {
+            return;
+        }
+        if self.planner.front().is_some_and(|b| b.jog) {
+            return self.cancel_jog();
+        }
+        if self.planner.is_empty() && self.probing.is_none() && self.paused.is_none() {
+            if let Some((end, line)) = self.dwell.take() {
+                self.dwell_held = Some((end - self.now, line));
+            }
+            self.held_left.get_or_insert(0.0);
+            return;
+        }
+        self.hold();
+    }
+
+    /// '~': a standing hold goes on (restoring the spindle its override
+    /// stopped), a door restores the spindle and coolant first.
+    pub(super) fn cycle_start(&mut self) {
+        if self.braking {
+            return; // GRBL resumes only a hold complete
+        }
+        if self.door {
+            if self.restore_at.is_some() {
+                return;
+            }
+            let mut wait = 0.0;
+            if self.modal.spindle.is_some() {
+                self.set_spindle(true);
+                wait += DOOR_SPINDLE_DELAY;
+            }
+            if self.modal.coolant.1 {
+                self.set_coolant(true);
+                wait += DOOR_COOLANT_DELAY;
+            }
+            self.restore_at = Some(self.now + wait);
+            return self.advance(self.now);
+        }
+        if std::mem::take(&mut self.spindle_stopped) && self.held_left.is_some() {
+            self.say("[MSG:Restoring spindle]");
+            self.set_spindle(true);
+        }
+        self.resume();
+    }
+
+    /// A hold's end: the move, the dwell or the pause it held go on.
+    pub(super) fn resume(&mut self) {
+        if let Some(left) = self.held_left.take() {
+            if !self.planner.is_empty() {
+                self.set_block_end(self.now + left);
+            }
+        }
+        if let Some((left, line)) = self.dwell_held.take() {
+            self.dwell = Some((self.now + left, line));
+        }
+        if let Some(line) = self.paused.take() {
+            // the operator changed the tool while it held
+            self.fit_next_tool();
+            self.log.push(line);
+            self.say("ok");
+        }
+        self.pump();
+    }
+
+    /// 0x84, the safety door opened: `[MSG:Check Door]`; moving, the
+    /// machine brakes as in a hold (Door:2), then stands with the spindle
+    /// and coolant off (Door:0, the door closed again: this machine has
+    /// no door switch, as GRBL's default build).
+    pub(super) fn open_door(&mut self) {
+        if self.alarm.is_some() || self.check || self.asleep {
+            return;
+        }
+        self.say("[MSG:Check Door]");
+        if self.planner.front().is_some_and(|b| b.jog) {
+            self.cancel_jog();
+        }
+        let was = self.door;
+        self.door = true;
+        self.restore_at = None;
+        if self.braking {
+            return;
+        }
+        if !was && !self.planner.is_empty() && self.held_left.is_none() {
+            return self.hold();
+        }
+        if self.planner.is_empty() {
+            if let Some((end, line)) = self.dwell.take() {
+                self.dwell_held = Some((end - self.now, line));
+            }
+        }
+        self.held_left.get_or_insert(0.0);
+        self.spindle_stopped = false;
+        self.set_spindle(false);
+        self.set_coolant(false);
+    }
+
+    /// 0x9E in a hold: the spindle off, or back on.
+    pub(super) fn spindle_stop(&mut self) {
+        if !matches!(self.state(), State::Hold(_)) {
+            return;
+        }
+        if self.spindle_stopped {
+            self.spindle_stopped = false;
+            self.say("[MSG:Restoring spindle]");
+            self.set_spindle(true);
+        } else if self.modal.spindle.is_some() {
+            self.spindle_stopped = true;
+            self.set_spindle(false);
         }
     }
 }

@@ -123,10 +123,16 @@ impl SimGrbl {
         });
         self.done = p.stop;
         self.modal.pos = p.stop;
-        self.probed = (p.touched.unwrap_or(p.stop), p.touched.is_some());
+        // GRBL keeps the probe's position only when it touched or was
+        // allowed not to (G38.3/G38.5); a failed G38.2 is ALARM:5, then
+        // the probe report and the line's ok as ever
+        self.probed = match p.touched {
+            Some(t) => (t, true),
+            None if !p.must_touch => (p.stop, false),
+            None => (self.probed.0, false),
+        };
         if p.touched.is_none() && p.must_touch {
             self.raise(5);
-            return;
         }
         let r = format!(
             "[PRB:{}:{}]",

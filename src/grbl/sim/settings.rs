@@ -144,6 +144,34 @@ impl Settings {
         self.ints[13] != 0
     }
 
+    /// `$10` bit 0: reports give the machine position (else the work's).
+    pub fn report_mpos(&self) -> bool {
+        self.ints[10] & 1 != 0
+    }
+
+    /// `$10` bit 1: reports give the buffers' room (`Bf:`).
+    pub fn report_buffers(&self) -> bool {
+        self.ints[10] & 2 != 0
+    }
+
+    /// The spindle speed GRBL sets for `rpm` ($30 max, $31 min): at or
+    /// above the maximum the maximum, below the minimum the minimum, 0
+    /// off.
+    pub fn spindle_rpm(&self, rpm: f64) -> f64 {
+        let (max, min) = (self.floats[30] as f64, self.floats[31] as f64);
+        if min >= max || rpm >= max {
+            max
+        } else if rpm <= min {
+            if rpm == 0.0 {
+                0.0
+            } else {
+                min
+            }
+        } else {
+            rpm
+        }
+    }
+
     /// Whether machine position `p` lies outside the travel soft limits
     /// guard: GRBL's machine space runs from 0 down to -travel on each
     /// axis (without HOMING_FORCE_SET_ORIGIN, as in its default build).

@@ -206,6 +206,38 @@ impl SimGrbl {
         Ok(true)
     }
 
+    /// The `$N0`/`$N1` lines GRBL runs after its welcome (not in an
+    /// alarm), each answered `>line:ok` or `>line:error:N`.
+    pub(super) fn run_startup(&mut self) {
+        for k in 0..2 {
+            let line = self.startup[k].clone();
+            if line.is_empty() {
+                continue;
+            }
+            let mark = self.out.len();
+            self.run(line.clone());
+            let now = self.now;
+            self.advance(now); // a G4 P0 answers at once
+                               // its answer, the last line it printed, goes after the line
+            let said: Vec<u8> = self.out.split_off(mark);
+            let text = String::from_utf8_lossy(&said).to_string();
+            let mut lines: Vec<&str> = text.split("\r\n").filter(|l| !l.is_empty()).collect();
+            let answer = lines
+                .last()
+                .copied()
+                .filter(|a| *a == "ok" || a.starts_with("error:"));
+            if answer.is_some() {
+                lines.pop();
+            }
+            for l in &lines {
+                self.say(l);
+            }
+            if let Some(a) = answer {
+                self.say(&format!(">{line}:{a}"));
+            }
+        }
+    }
+
     /// `$G`: the parser's modes as GRBL reports them.
     fn parser_state(&self) -> String {
         let m = &self.modal;

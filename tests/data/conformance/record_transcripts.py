@@ -19,6 +19,11 @@ and then polls '?' once (unless "poll" is false). Kept per step:
   trigger  the last report of an "at" wait, and polls: how many '?' it took
            (GRBL's report counters count them: the replay sends as many)
 
+No scenario overflows the receive buffer: grbl_sim.exe reads its stdin only
+while GRBL's receive ring has room (simulate_serial in its serial.c), as a
+pipe with flow control would, where the AVR's UART drops the bytes. That
+case is the simulated GRBL's unit test (src/grbl/sim).
+
 Usage: record_transcripts.py [--grbl DIR] [--out FILE] [--only A,B]
   --only A,B  record these scenarios again, keeping the others
   --grbl DIR  a built GRBL 1.1h, as for generate.py (by default the one
@@ -80,9 +85,13 @@ SCENARIOS = {
     "alarm_and_unlock": [
         ("G38.2 Z-2 F300\n", A), ("", wait(1.0)), ("G0 X1\n", A), ("$H\n", A), ("$#\n", A),
         ("$X\n", A), ("G0 X1\n", A), ("", wait(1.0))],
+    # one override byte a step: GRBL folds the bytes that arrive between
+    # two of its realtime checks into one step (12 coarse steps sent at
+    # once moved it 11 times)
     "feed_override": [
-        ("G1 X40 F300\n", A), (FEED_UP * 3, at(0, 3.0, 0.5)), ("", wait(0.5)),
-        (FEED_DOWN * 12, wait(0.5)), (FEED_RESET + FEED_DOWN, wait(0.3)), (RESET, wait(1.5)),
+        ("G1 X40 F300\n", A), (FEED_UP, at(0, 3.0, 0.4)), (FEED_UP, wait(0.4)),
+        (FEED_DOWN, wait(0.4)), ("\x94", wait(0.4)), ("\x93", wait(0.4)),
+        (FEED_RESET, wait(0.4)), (FEED_DOWN, wait(0.4)), (RESET, at(0, 30.0, 1.5)),
         ("", wait(0.3)), ("", wait(0.3))],
     "rapid_and_spindle_override": [
         (RAPID_50 + SPINDLE_UP * 2, wait(0.3)), ("M3 S1000\n", A), ("", wait(0.3)),
@@ -117,13 +126,11 @@ SCENARIOS = {
         ("", wait(1.0))],
     "sleep": [
         ("$SLP\n", A), ("G0 X1\n", A), ("$X\n", A), (RESET, wait(1.5)), ("$X\n", A)],
-    # 15 moves of 4 s fill the planner, the 16th waits in GRBL's main loop
-    # with 4 more behind it: the receive buffer has 95 bytes free for the
-    # 213 that follow
-    "buffer_overflow": [
-        ("G1 F30\n" + "".join("G1 X%d\n" % (2 * k) for k in range(1, 21)), A),
-        ("(" + "x" * 68 + ")\nG1 X2 (" + "y" * 62 + ")\nG1 X3 (" + "z" * 62 + ")\n", wait(2.0)),
-        (RESET, wait(1.5))],
+    "startup_lines": [
+        ("$N0=G20 G91\n", A), ("$N1=S250 G4P0\n", A), ("$N\n", A), (RESET, wait(1.5)),
+        ("$G\n", A), ("$N0=\n$N1=\n", A), (RESET, wait(1.5)), ("$G\n", A)],
+    "inverse_time": [
+        ("G93 G1 X10 F30\n", A), ("", wait(1.2)), ("", wait(1.5)), ("G2 X30 I10 F15\n", wait(12.0)), ("G94 G0 X0\n", A), ("", wait(2.0))],
     "dwell_and_hold": [
         ("G4 P1.5\n", wait(0.3)), (HOLD, wait(0.5)), (START, wait(2.0))],
 }
