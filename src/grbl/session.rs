@@ -269,7 +269,11 @@ impl Readout {
         }
         self.overrides = st.overrides.or(self.overrides);
         self.buffer = st.free.map(|(b, r)| [b as u32, r as u32]).or(self.buffer);
-        (self.pins, self.accessories) = (st.pins, st.accessories);
+        self.pins = st.pins;
+        // A: comes with Ov only (none there: spindle and coolant off)
+        if st.overrides.is_some() {
+            self.accessories = st.accessories;
+        }
         if st.state != State::Alarm {
             self.alarm = None;
         }
@@ -661,6 +665,12 @@ mod tests {
             (r.state.as_deref(), r.pins.as_str()),
             (Some("Hold:1"), "PZ")
         );
+        // A: comes with Ov alone: kept between, cleared by an Ov without it
+        assert!(r.status("<Run|MPos:0,0,0|FS:500,12000|Ov:100,100,100|A:SF>"));
+        assert!(r.status("<Run|MPos:0,0,0|FS:500,12000>"));
+        assert_eq!(r.accessories, "SF");
+        assert!(r.status("<Idle|MPos:0,0,0|FS:0,0|Ov:100,100,100>"));
+        assert_eq!(r.accessories, "");
         assert!(!r.status("<Dancing|MPos:0,0,0>") && !r.status("ok"));
     }
 

@@ -265,6 +265,11 @@ pub fn changed(a: &image::RgbaImage, b: &image::RgbaImage, tol: u8) -> f64 {
 /// is). Returns the job's summary.
 pub fn make_job(b: &Browser, settings: &[(&str, &str)]) -> String {
     for (css, value) in settings {
+        // (the page builds its controls once its script has run)
+        b.wait(&format!("the control {css}"), 30, || {
+            let found = b.script(&format!("return document.querySelector('{css}') !== null;"));
+            found.as_bool().unwrap_or(false).then_some(())
+        });
         b.script(&format!(
             "const e = document.querySelector('{css}'); e.value = '{value}'; \
              for (const k of ['input', 'change']) \
