@@ -56,12 +56,15 @@ pub fn plan(moves: &mut [Move], v_in: f64) {
     };
     first.entry = first.entry.min(v_in);
     // backward: each entry no faster than the move can shed before the
-    // next one's entry (the last ends at rest)
+    // next one's entry (the last ends at rest); the first may be entered
+    // above its top (an override slowed the move the machine is in: it
+    // slows down at its acceleration, as GRBL's stepper does)
     let mut next = 0.0f64;
-    for m in moves.iter_mut().rev() {
+    for (k, m) in moves.iter_mut().enumerate().rev() {
+        let top = if k == 0 { f64::INFINITY } else { m.top };
         m.entry = m
             .entry
-            .min(m.top)
+            .min(top)
             .min((next * next + 2.0 * m.accel * m.len).sqrt());
         next = m.entry;
     }
@@ -83,6 +86,13 @@ pub fn exit(moves: &[Move], k: usize) -> f64 {
 /// cruising at most at `top`, changing speed at `accel`.
 pub fn run_time(len: f64, entry: f64, top: f64, exit: f64, accel: f64) -> f64 {
     let a = accel;
+    if entry > top {
+        let (d1, d3) = slow_down(entry, top, exit, a);
+        if d1 + d3 >= len {
+            return 2.0 * len / (entry + exit);
+        }
+        return (entry - top) / a + (len - d1 - d3) / top + (top - exit) / a;
+    }
     let peak = top
         .min(((2.0 * a * len + entry * entry + exit * exit) / 2.0).sqrt())
         .max(entry.max(exit));
@@ -96,6 +106,25 @@ pub fn run_time(len: f64, entry: f64, top: f64, exit: f64, accel: f64) -> f64 {
 /// the distance covered and the speed then.
 pub fn at_time(len: f64, entry: f64, top: f64, exit: f64, accel: f64, t: f64) -> (f64, f64) {
     let a = accel;
+    let t = t.max(0.0);
+    if entry > top {
+        let (d1, d3) = slow_down(entry, top, exit, a);
+        if d1 + d3 >= len {
+            // one even deceleration from entry to exit over the move
+            let dec = (entry * entry - exit * exit) / (2.0 * len);
+            let t = t.min((entry - exit) / dec.max(1e-12));
+            return ((entry * t - 0.5 * dec * t * t).min(len), entry - dec * t);
+        }
+        let (t1, tc) = ((entry - top) / a, (len - d1 - d3) / top);
+        if t <= t1 {
+            return (entry * t - 0.5 * a * t * t, entry - a * t);
+        }
+        if t <= t1 + tc {
+            return (d1 + top * (t - t1), top);
+        }
+        let t = (t - t1 - tc).min((top - exit) / a);
+        return ((len - d3 + top * t - 0.5 * a * t * t).min(len), top - a * t);
+    }
     let peak = top
         .min(((2.0 * a * len + entry * entry + exit * exit) / 2.0).sqrt())
         .max(entry.max(exit));
@@ -120,9 +149,38 @@ pub fn at_time(len: f64, entry: f64, top: f64, exit: f64, accel: f64, t: f64) ->
     )
 }
 
+/// A move entered above its top: the distances to slow down to the top,
+/// and from the top to its exit.
+fn slow_down(entry: f64, top: f64, exit: f64, a: f64) -> (f64, f64) {
+    (
+        (entry * entry - top * top) / (2.0 * a),
+        (top * top - exit.min(top) * exit.min(top)) / (2.0 * a),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Entered above its top (an override slowed it), a move slows down
+    /// at its acceleration, cruises, and stops; where it is agrees with
+    /// how long it takes.
+    #[test]
+    fn a_move_entered_too_fast_slows_down() {
+        // 10 mm/s into a 5 mm/s move of 20 mm, 10 mm/s²: 3.75 mm in 0.5 s
+        // down to 5, 1.25 mm to stop in 0.5 s, 15 mm at 5 in 3 s
+        let t = run_time(20.0, 10.0, 5.0, 0.0, 10.0);
+        assert!((t - 4.0).abs() < 1e-12, "{t}");
+        let (s, v) = at_time(20.0, 10.0, 5.0, 0.0, 10.0, 0.5);
+        assert!((s - 3.75).abs() < 1e-12 && (v - 5.0).abs() < 1e-12);
+        let (s, v) = at_time(20.0, 10.0, 5.0, 0.0, 10.0, 4.0);
+        assert!((s - 20.0).abs() < 1e-9 && v.abs() < 1e-12, "{s} {v}");
+        // too short to reach the top: one even deceleration
+        let t = run_time(4.0, 10.0, 5.0, 0.0, 12.5);
+        assert!((t - 0.8).abs() < 1e-12, "{t}");
+        let (s, _) = at_time(4.0, 10.0, 5.0, 0.0, 12.5, 0.8);
+        assert!((s - 4.0).abs() < 1e-9, "{s}");
+    }
 
     #[test]
     fn a_lone_move_is_a_trapezoid() {

@@ -26,21 +26,14 @@ const DOOR_COOLANT_DELAY: f64 = 1.0;
 impl SimGrbl {
     /// How far along the running head block the machine is, and how fast
     /// it goes (None when nothing runs).
-    fn head_progress(&self) -> Option<(f64, f64)> {
+    pub(super) fn head_progress(&self) -> Option<(f64, f64)> {
         let b = self.planner.front()?;
         if self.held_left.is_some() || self.paused.is_some() || self.frozen {
             return None;
         }
         let v = self.top_speed(b);
         let t = self.now - self.head_start;
-        Some(planner::at_time(
-            b.dist,
-            b.entry.min(v),
-            v,
-            b.exit.min(v),
-            b.a,
-            t,
-        ))
+        Some(planner::at_time(b.dist, b.entry, v, b.exit.min(v), b.a, t))
     }
 
     /// The machine's position now (machine coordinates), between block

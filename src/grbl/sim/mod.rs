@@ -396,7 +396,7 @@ impl SimGrbl {
     /// How long `b` takes at the overrides now, as planned.
     fn run_time(&self, b: &Block) -> f64 {
         let v = self.top_speed(b);
-        planner::run_time(b.dist, b.entry.min(v), v, b.exit.min(v), b.a)
+        planner::run_time(b.dist, b.entry, v, b.exit.min(v), b.a)
     }
 
     /// Plan the blocks queued with GRBL's look-ahead, the head entered at
@@ -425,7 +425,7 @@ impl SimGrbl {
         self.block_end = self.head_start + t;
     }
 
-    /// The head block ends at `end` (resumed, or sped up by an override):
+    /// The head block ends at `end` (resumed from a hold):
     /// it started a run time before.
     fn set_block_end(&mut self, end: f64) {
         self.block_end = end;
@@ -440,10 +440,11 @@ impl SimGrbl {
         self.plan_head();
     }
 
-    /// A realtime override byte (0x90-0x9D) as GRBL 1.1 takes it; the
-    /// running block goes on at the new speed from where it is.
+    /// A realtime override byte (0x90-0x9D) as GRBL 1.1 takes it: the
+    /// queued blocks are planned again at the new speeds, the running one
+    /// from where the machine is at the speed it has (speeding up or
+    /// slowing down at its acceleration).
     fn override_by(&mut self, b: u8) {
-        let before = self.planner.front().map(|f| self.run_time(f));
         let was = self.ov;
         let (f, r, s) = &mut self.ov;
         let step = |v: &mut u32, by: i32| *v = (*v as i32 + by).clamp(10, 200) as u32;
@@ -471,15 +472,39 @@ impl SimGrbl {
                 .settings
                 .spindle_rpm(self.modal.speed * self.ov.2 as f64 / 100.0);
         }
-        let after = self.planner.front().map(|f| self.run_time(f));
-        if let (Some(t0), Some(t1)) = (before, after) {
-            if t0 > 0.0 {
-                match self.held_left.as_mut() {
-                    Some(left) => *left *= t1 / t0,
-                    None => self.set_block_end(self.now + (self.block_end - self.now) * t1 / t0),
-                }
-            }
+        if (self.ov.0, self.ov.1) == (was.0, was.1) || self.braking || self.planner.is_empty() {
+            return;
         }
+        if self.held_left.is_some() {
+            // standing: what is left is planned from rest at the new speeds
+            self.exit_speed = 0.0;
+            self.start_head();
+            self.held_left = Some(self.block_end - self.now);
+        } else if let Some((s, v)) = self.head_progress() {
+            self.split_head(s);
+            self.exit_speed = v;
+            self.start_head();
+        }
+    }
+
+    /// The running head block from `s` mm along it on: the part behind
+    /// counts as done, the rest is entered at the speed the machine has.
+    fn split_head(&mut self, s: f64) {
+        let tip = self.tip();
+        let b = self.planner.front_mut().unwrap();
+        if s <= 0.0 || s >= b.dist {
+            return;
+        }
+        let here = b.start + (b.end - b.start) * (s / b.dist);
+        self.tips.push(TipMove {
+            from: b.start - tip,
+            to: here - tip,
+            rapid: b.rapid,
+            tool: self.tool,
+        });
+        (b.start, b.dist) = (here, b.dist - s);
+        b.max_entry = f64::INFINITY;
+        self.done = here;
     }
 
     /// Jog cancel (0x85, or a hold while jogging): the jog brakes to a
