@@ -906,3 +906,74 @@ fn machine_jogs_zeroes_and_probes() {
     let _ = sim.kill();
     let _ = sim.wait();
 }
+
+/// The page's tool change stops the job before its M0 with the machine
+/// standing Idle, where the page jogs. GRBL can report Idle once while
+/// the moves it holds have yet to start (the report and the cycle start
+/// due in one pass of its realtime loop print the report first): taken
+/// for standing, that report would let the jog go to a running machine,
+/// which GRBL refuses with error:8. The sender waits for two Idle reports
+/// in a row.
+#[test]
+fn a_page_pause_is_not_fooled_by_an_idle_report_before_the_cycle_starts() {
+    use relievo::grbl::remote::{Remote, Step, Told};
+    use std::sync::{Arc, Mutex};
+    let d = scratch("send-stale-idle");
+    let path = d.join("change.nc");
+    std::fs::write(
+        &path,
+        "G21 G90 G94\nG0 Z2\nG1 X20 Y1 F600\nG0 Z5\nM0 (fit the 1 mm ball)\n\
+         G0 X1 Y1\nG1 Z0 F300\nG0 Z5\nM2\n",
+    )
+    .unwrap();
+    // (the listener jogs at the pause, and goes on once the jog is answered)
+    let heard: Arc<Mutex<Vec<String>>> = Arc::default();
+    let me: Arc<Mutex<Option<Remote>>> = Arc::default();
+    let jogging = Arc::new(Mutex::new(None::<String>));
+    let (h, m, j) = (heard.clone(), me.clone(), jogging.clone());
+    let rm = Remote::new(move |t| {
+        let rm = m.lock().unwrap().clone().unwrap();
+        match t {
+            Told::Paused(Some(_)) => {
+                *j.lock().unwrap() = Some(String::new());
+                rm.push_step(Step::Line("$J=G91G21Z-3F600".into()));
+            }
+            Told::Heard(l) => {
+                h.lock().unwrap().push(l.to_string());
+                let mut j = j.lock().unwrap();
+                if j.as_deref() == Some("") && (l == "ok" || l.starts_with("error:")) {
+                    *j = Some(l.to_string());
+                    rm.go_on();
+                }
+            }
+            _ => {}
+        }
+    });
+    *me.lock().unwrap() = Some(rm.clone());
+    let mut p = port(Faults {
+        stale_idle_after: Some(4),
+        ..Faults::default()
+    });
+    let run = SendJob {
+        remote: Some(rm),
+        ..job(&path)
+    };
+    let (o, n) = run.run(&mut p, &AtomicBool::new(false)).unwrap();
+    let heard = heard.lock().unwrap();
+    let stale = heard
+        .iter()
+        .position(|l| l.starts_with("<Idle|"))
+        .expect("an Idle report");
+    eprintln!(
+        "the first Idle report, heard while the job ran: {}",
+        heard[stale]
+    );
+    assert_eq!(
+        jogging.lock().unwrap().as_deref(),
+        Some("ok"),
+        "the jog at the pause: {:?}",
+        &heard[stale..]
+    );
+    assert!(o.errors.is_empty() && n == 9, "{:?}", o.errors);
+    std::fs::remove_dir_all(d).unwrap();
+}

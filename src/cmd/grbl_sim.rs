@@ -100,6 +100,7 @@ pub fn run(args: GrblSimArgs) -> relievo::Result<()> {
         hold_at: args.hold_at,
         freeze_at: args.freeze_at,
         chatty: args.chatty,
+        ..Faults::default()
     };
     let (mut master, slave) = serialport::TTYPort::pair()
         .map_err(|e| relievo::Error(format!("grbl-sim: no pseudo-terminal: {e}")))?;

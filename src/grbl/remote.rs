@@ -111,7 +111,7 @@ impl Remote {
     /// Held before a pause line `what` with the machine Idle: the page's
     /// realtime bytes and lines go through (one line at a time, each
     /// answered), the readout stays live; once told to go on with the
-    /// machine Idle and nothing left to send, `back` (the job's own state
+    /// machine Idle (two reports in a row) and nothing left to send, `back` (the job's own state
     /// there) is sent, each line answered, and the job goes on. Returns
     /// at once when told to stop.
     pub fn tool_change(
@@ -123,7 +123,10 @@ impl Remote {
     ) -> Result<()> {
         self.tell(Told::Paused(Some(what)));
         let mut last_poll = f64::MIN;
-        let (mut awaiting, mut idle) = (false, true);
+        // Idle reports in a row since the page's last line was answered
+        // (GRBL may say Idle once before a move it took starts; the
+        // sender paused on two)
+        let (mut awaiting, mut idle) = (false, 2);
         loop {
             if self.stop.load(Ordering::Relaxed) {
                 return Ok(());
@@ -137,11 +140,12 @@ impl Remote {
                 match step {
                     Some(Step::Line(l)) => {
                         r.port.write_all(format!("{l}\n").as_bytes())?;
-                        awaiting = true;
+                        (awaiting, idle) = (true, 0);
                     }
                     Some(Step::Routine(routine)) => {
                         let said = routine.run(r).unwrap_or_else(|e| e.0);
                         self.tell(Told::Said(&said));
+                        idle = 0;
                     }
                     None => {}
                 }
@@ -154,11 +158,15 @@ impl Remote {
                 self.tell(Told::Heard(&l));
                 awaiting &= !(l == "ok" || l.starts_with("error:"));
                 if let Some(st) = parse_status(&l) {
-                    idle = st.state == State::Idle;
+                    idle = if st.state == State::Idle && !awaiting {
+                        idle + 1
+                    } else {
+                        0
+                    };
                 }
             }
             let queued = !self.queue().is_empty();
-            if idle && !awaiting && !queued && self.take_go_on() {
+            if idle >= 2 && !awaiting && !queued && self.take_go_on() {
                 break;
             }
         }

@@ -49,6 +49,10 @@ pub struct Faults {
     /// Probability that a reply line gets noise bytes (non-ASCII, as a
     /// noisy USB-serial adapter produces) spliced into it.
     pub garble: f64,
+    /// After line N, the first status report taken while moves run says
+    /// Idle, as GRBL's does when the report and the cycle start are due
+    /// in the same pass of its realtime loop (the report prints first).
+    pub stale_idle_after: Option<usize>,
 }
 
 /// A completed move as the tool's tip went: machine coordinates less the

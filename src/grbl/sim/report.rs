@@ -37,7 +37,12 @@ impl Counters {
 impl SimGrbl {
     /// A status report, and the counters turned as GRBL turns them.
     pub(super) fn status(&mut self) -> String {
-        let state = self.state();
+        let mut state = self.state();
+        let stale = self.faults.stale_idle_after;
+        if state == State::Run && stale.is_some_and(|n| self.gcode_lines >= n) {
+            self.faults.stale_idle_after = None;
+            state = State::Idle;
+        }
         let busy = matches!(
             state,
             State::Run | State::Hold(_) | State::Jog | State::Home | State::Door(_)
