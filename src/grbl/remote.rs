@@ -7,7 +7,7 @@
 //! the machine back in the job's state there (`resume::reentry_at`).
 
 use super::replies::{parse_status, Replies};
-use super::state::State;
+use super::state::Standing;
 use super::touchoff::Routine;
 use crate::bail;
 use crate::error::Result;
@@ -123,10 +123,8 @@ impl Remote {
     ) -> Result<()> {
         self.tell(Told::Paused(Some(what)));
         let mut last_poll = f64::MIN;
-        // Idle reports in a row since the page's last line was answered
-        // (GRBL may say Idle once before a move it took starts; the
-        // sender paused on two)
-        let (mut awaiting, mut idle) = (false, 2);
+        // (the sender paused with the machine standing)
+        let (mut awaiting, mut idle) = (false, Standing::sure());
         loop {
             if self.stop.load(Ordering::Relaxed) {
                 return Ok(());
@@ -140,12 +138,13 @@ impl Remote {
                 match step {
                     Some(Step::Line(l)) => {
                         r.port.write_all(format!("{l}\n").as_bytes())?;
-                        (awaiting, idle) = (true, 0);
+                        awaiting = true;
+                        idle.sent();
                     }
                     Some(Step::Routine(routine)) => {
                         let said = routine.run(r).unwrap_or_else(|e| e.0);
                         self.tell(Told::Said(&said));
-                        idle = 0;
+                        idle.sent();
                     }
                     None => {}
                 }
@@ -158,15 +157,11 @@ impl Remote {
                 self.tell(Told::Heard(&l));
                 awaiting &= !(l == "ok" || l.starts_with("error:"));
                 if let Some(st) = parse_status(&l) {
-                    idle = if st.state == State::Idle && !awaiting {
-                        idle + 1
-                    } else {
-                        0
-                    };
+                    idle.report(st.state, awaiting);
                 }
             }
             let queued = !self.queue().is_empty();
-            if idle >= 2 && !awaiting && !queued && self.take_go_on() {
+            if idle.is_sure() && !awaiting && !queued && self.take_go_on() {
                 break;
             }
         }

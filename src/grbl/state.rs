@@ -68,6 +68,38 @@ impl fmt::Display for State {
     }
 }
 
+/// Whether GRBL stands, from its status reports: two saying Idle in a
+/// row with every line sent answered. GRBL can say Idle once with moves
+/// still queued (a report and the cycle start due in the same pass of its
+/// realtime loop print the report first), never twice.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Standing(u32);
+
+impl Standing {
+    /// Known to stand (as after two Idle reports).
+    pub fn sure() -> Standing {
+        Standing(2)
+    }
+
+    /// A status report's state; `owed`: a line sent is not yet answered.
+    pub fn report(&mut self, state: State, owed: bool) {
+        self.0 = if state == State::Idle && !owed {
+            self.0.saturating_add(1)
+        } else {
+            0
+        };
+    }
+
+    /// A line went out: the reports before it say nothing of it.
+    pub fn sent(&mut self) {
+        self.0 = 0;
+    }
+
+    pub fn is_sure(self) -> bool {
+        self.0 >= 2
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -93,5 +125,22 @@ mod tests {
             assert_eq!(State::parse(bad), None, "{bad}");
         }
         assert!(State::Door(1).is_held() && !State::Run.is_held());
+    }
+
+    #[test]
+    fn standing_takes_two_idle_reports_with_nothing_owed() {
+        let mut s = Standing::default();
+        s.report(State::Idle, false);
+        assert!(!s.is_sure(), "one Idle report");
+        s.report(State::Idle, false);
+        assert!(s.is_sure());
+        s.sent();
+        s.report(State::Idle, true);
+        s.report(State::Idle, false);
+        assert!(!s.is_sure(), "Idle while a line was owed");
+        s.report(State::Run, false);
+        s.report(State::Idle, false);
+        assert!(!s.is_sure(), "Run between");
+        assert!(Standing::sure().is_sure());
     }
 }

@@ -12,7 +12,7 @@ use super::replies::{parse_status, Replies, Status};
 use super::resume::{highest_z, reentry_at, Journal, Tracker};
 use super::sender::{OnPause, Options, Outcome, Stop, STALL_MARGIN};
 use super::session::Realtime;
-use super::state::State;
+use super::state::{Standing, State};
 use super::touchoff::{touch_off, Routine};
 use super::{CYCLE_START, FEED_HOLD, SPINDLE_STOP, STATUS};
 use crate::bail;
@@ -129,11 +129,8 @@ struct Stream<'a> {
     keys: Keys,
     /// The last status report said Hold.
     holding: bool,
-    /// Status reports in a row saying Idle with every line sent answered.
-    /// GRBL can say Idle once with moves still queued (a report and the
-    /// cycle start due in the same pass of its realtime loop print the
-    /// report first), never twice.
-    idle_reports: u32,
+    /// Whether the machine stands with every line sent answered.
+    standing: Standing,
 }
 
 /// Stream `lines` (with `preamble` lines sent first, unjournaled).
@@ -215,7 +212,7 @@ impl<'a> Stream<'a> {
             ),
             keys: Keys::new(opts.keys && !check_mode),
             holding: false,
-            idle_reports: 0,
+            standing: Standing::default(),
         })
     }
 
@@ -335,7 +332,7 @@ impl<'a> Stream<'a> {
             batch.push(b'\n');
             self.out.bytes += len;
             self.inflight.push_back((self.next, len));
-            self.idle_reports = 0;
+            self.standing.sent();
             self.used += len;
             if !self.check_mode && item.job.is_some_and(|k| self.lines[k].pause) {
                 self.phase = Phase::AtPause {
@@ -455,13 +452,9 @@ impl<'a> Stream<'a> {
         // the page's pause stands Idle before the M0, the terminal's in
         // the M0's Hold
         let page = self.page_pauses();
-        if self.inflight.is_empty() && st.state == State::Idle {
-            self.idle_reports += 1;
-        } else {
-            self.idle_reports = 0;
-        }
+        self.standing.report(st.state, !self.inflight.is_empty());
         let standing = if page {
-            self.idle_reports >= 2
+            self.standing.is_sure()
         } else {
             matches!(st.state, State::Hold(_))
         };

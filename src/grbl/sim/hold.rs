@@ -6,7 +6,7 @@
 //! coolant off, and restores them at cycle start) and the spindle stop
 //! override in a hold. GRBL's main loop takes no line while one holds it.
 
-use super::{SimGrbl, TipMove};
+use super::SimGrbl;
 use crate::gcode::planner;
 use crate::grbl::state::State;
 use glam::DVec3;
@@ -69,13 +69,7 @@ impl SimGrbl {
         let u = (b.end - b.start) / b.dist;
         let stop_at = (s + v * SEGMENT_LAG + v * v / (2.0 * b.a)).min(b.dist);
         let (here, stop) = (b.start + u * s, b.start + u * stop_at);
-        let tip = self.tip();
-        self.tips.push(TipMove {
-            from: b.start - tip,
-            to: here - tip,
-            rapid: b.rapid,
-            tool: self.tool,
-        });
+        self.record_tip(b.start, here, b.rapid);
         self.done = here;
         let rest = b.dist - stop_at;
         let mut brake = b.clone();
@@ -117,9 +111,7 @@ impl SimGrbl {
             self.held_left = Some(self.block_end - self.now);
         }
     }
-}
 
-impl SimGrbl {
     /// '!': a hold, as GRBL takes it in each state (none in an alarm, in
     /// check mode or behind a door; a jog is cancelled). Standing, the
     /// machine holds at once, a dwell with it.
@@ -131,13 +123,18 @@ impl SimGrbl {
             return self.cancel_jog();
         }
         if self.planner.is_empty() && self.probing.is_none() && self.paused.is_none() {
-            if let Some((end, line)) = self.dwell.take() {
-                self.dwell_held = Some((end - self.now, line));
-            }
-            self.held_left.get_or_insert(0.0);
-            return;
+            return self.hold_standing();
         }
         self.hold();
+    }
+
+    /// Held where the machine stands (no move runs): a dwell waits with
+    /// the hold, for its time left.
+    fn hold_standing(&mut self) {
+        if let Some((end, line)) = self.dwell.take() {
+            self.dwell_held = Some((end - self.now, line));
+        }
+        self.held_left.get_or_insert(0.0);
     }
 
     /// '~': a standing hold goes on (restoring the spindle its override
@@ -209,12 +206,7 @@ impl SimGrbl {
         if !was && !self.planner.is_empty() && self.held_left.is_none() {
             return self.hold();
         }
-        if self.planner.is_empty() {
-            if let Some((end, line)) = self.dwell.take() {
-                self.dwell_held = Some((end - self.now, line));
-            }
-        }
-        self.held_left.get_or_insert(0.0);
+        self.hold_standing();
         self.spindle_stopped = false;
         self.set_spindle(false);
         self.set_coolant(false);

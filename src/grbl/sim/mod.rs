@@ -55,6 +55,17 @@ pub struct Faults {
     pub stale_idle_after: Option<usize>,
 }
 
+/// The speed a queued move asks for, mm/min.
+#[derive(Clone, Copy, Debug)]
+enum Feed {
+    /// The modal F (a rapid: the axes' rates).
+    Modal,
+    /// Its line's own: G93's F in 1/min made a speed.
+    Line(f64),
+    /// A `$J=` jog's (no override acts on it).
+    Jog(f64),
+}
+
 /// A completed move as the tool's tip went: machine coordinates less the
 /// length of the tool in the spindle (the `tool`-th, from 0).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -182,10 +193,9 @@ pub struct SimGrbl {
     jog_cancel: bool,
     /// A dwell a hold stopped: its time left and its line.
     dwell_held: Option<(f64, String)>,
-    /// The feed of the line being queued in G93 (mm/min).
-    line_feed: Option<f64>,
-    /// An arc's chords not yet planned, where the next starts, its line.
-    arc_left: Option<(VecDeque<DVec3>, DVec3, String)>,
+    /// An arc's chords not yet planned, where the next starts, its line
+    /// and its feed.
+    arc_left: Option<(VecDeque<DVec3>, DVec3, String, Feed)>,
 }
 
 impl SimGrbl {
@@ -244,7 +254,6 @@ impl SimGrbl {
             restore_at: None,
             jog_cancel: false,
             dwell_held: None,
-            line_feed: None,
             arc_left: None,
         };
         s.say(&format!("\r\n{WELCOME}"));
@@ -307,13 +316,7 @@ impl SimGrbl {
             self.now = at;
             if self.block_due().is_some_and(|e| e <= at) {
                 let b = self.planner.pop_front().unwrap();
-                let tip = self.tip();
-                self.tips.push(TipMove {
-                    from: b.start - tip,
-                    to: b.end - tip,
-                    rapid: b.rapid,
-                    tool: self.tool,
-                });
+                self.record_tip(b.start, b.end, b.rapid);
                 self.done = b.end;
                 self.log.extend(b.lines);
                 self.exit_speed = b.exit;
@@ -494,20 +497,15 @@ impl SimGrbl {
     /// The running head block from `s` mm along it on: the part behind
     /// counts as done, the rest is entered at the speed the machine has.
     fn split_head(&mut self, s: f64) {
-        let tip = self.tip();
         let b = self.planner.front_mut().unwrap();
         if s <= 0.0 || s >= b.dist {
             return;
         }
+        let (from, rapid) = (b.start, b.rapid);
         let here = b.start + (b.end - b.start) * (s / b.dist);
-        self.tips.push(TipMove {
-            from: b.start - tip,
-            to: here - tip,
-            rapid: b.rapid,
-            tool: self.tool,
-        });
         (b.start, b.dist) = (here, b.dist - s);
         b.max_entry = f64::INFINITY;
+        self.record_tip(from, here, rapid);
         self.done = here;
     }
 
@@ -529,7 +527,7 @@ impl SimGrbl {
                 self.modal.pos = step.from;
                 return Err(15);
             }
-            self.queue_as(step.from, to, String::new(), Some(step.jog_feed));
+            self.queue_as(step.from, to, String::new(), Feed::Jog(step.jog_feed));
         }
         Ok(())
     }
@@ -625,16 +623,9 @@ impl SimGrbl {
     /// empties and the part of its head block run counts as done.
     fn stop_here(&mut self) {
         let here = self.position();
-        if let Some(b) = self.planner.front() {
-            let tip = self.tip();
-            let run = TipMove {
-                from: b.start - tip,
-                to: here - tip,
-                rapid: b.rapid,
-                tool: self.tool,
-            };
-            if here != b.start {
-                self.tips.push(run);
+        if let Some(&Block { start, rapid, .. }) = self.planner.front() {
+            if here != start {
+                self.record_tip(start, here, rapid);
             }
         }
         self.planner.clear();
@@ -826,15 +817,12 @@ impl SimGrbl {
                             let pts = a.points(step.from, to, self.settings.arc_tolerance());
                             // G93: mc_arc multiplies F by the chords and
                             // plans them at that many mm/min
-                            self.line_feed = self
-                                .modal
-                                .inverse_time
-                                .then(|| self.modal.feed.unwrap_or(0.0) * pts.len() as f64);
-                            self.arc_left = Some((pts.into(), step.from, line));
+                            let feed = self.inverse_time_feed(pts.len() as f64);
+                            self.arc_left = Some((pts.into(), step.from, line, feed));
                             return self.feed_arc();
                         }
                         None => {
-                            self.inverse_time_feed(step.from, to);
+                            let feed = self.inverse_time_feed((to - step.from).length());
                             // G28/G30 by their point on the way
                             let from = match step.via {
                                 Some(v) => {
@@ -843,7 +831,7 @@ impl SimGrbl {
                                 }
                                 None => step.from,
                             };
-                            self.queue(from, to, line)
+                            self.queue_as(from, to, line, feed)
                         }
                     }
                 }
@@ -889,11 +877,11 @@ impl SimGrbl {
     /// move allows (junction deviation, as GRBL computes it), never faster
     /// than the previous move got, and accelerates toward its rate.
     fn queue(&mut self, from: DVec3, target: DVec3, line: String) {
-        self.queue_as(from, target, line, None)
+        self.queue_as(from, target, line, Feed::Modal)
     }
 
-    /// Queue a move; `jog`: a jog at that feed (mm/min).
-    fn queue_as(&mut self, from: DVec3, target: DVec3, line: String, jog: Option<f64>) {
+    /// Queue a move at `feed`.
+    fn queue_as(&mut self, from: DVec3, target: DVec3, line: String, feed: Feed) {
         let d = target - from;
         let dist = d.length();
         // GRBL plans in whole steps and drops a block of none
@@ -905,11 +893,12 @@ impl SimGrbl {
         // the slowest axis' rate and acceleration along the move
         let along = |lim: DVec3| planner::along(u, lim);
         let top = along(self.settings.rates()) / 60.0;
-        let rapid = self.modal.motion == 0 && jog.is_none();
-        let v = match jog {
-            Some(f) => (f / 60.0).min(top),
-            None if rapid => top,
-            None => (self.line_feed.or(self.modal.feed).unwrap_or(1.0) / 60.0).min(top),
+        let jog = matches!(feed, Feed::Jog(_));
+        let rapid = self.modal.motion == 0 && !jog;
+        let v = match feed {
+            Feed::Jog(f) | Feed::Line(f) => (f / 60.0).min(top),
+            Feed::Modal if rapid => top,
+            Feed::Modal => (self.modal.feed.unwrap_or(1.0) / 60.0).min(top),
         };
         let a = along(self.settings.accels());
         // a move queued behind others may enter as fast as its corner
@@ -929,7 +918,7 @@ impl SimGrbl {
             max_entry,
             entry: 0.0,
             exit: 0.0,
-            jog: jog.is_some(),
+            jog,
             brake: false,
             start: from,
             rapid,
@@ -947,32 +936,34 @@ impl SimGrbl {
         }
     }
 
-    /// G93: the line's feed in mm/min, to take 1/F minutes.
-    fn inverse_time_feed(&mut self, from: DVec3, to: DVec3) {
-        self.line_feed = self
-            .modal
-            .inverse_time
-            .then(|| self.modal.feed.unwrap_or(0.0) * (to - from).length());
+    /// The feed of a line: in G93, F (1/min) times `per`, its length
+    /// (a line in 1/F minutes) or an arc's chords (as GRBL's mc_arc).
+    fn inverse_time_feed(&self, per: f64) -> Feed {
+        if self.modal.inverse_time {
+            Feed::Line(self.modal.feed.unwrap_or(0.0) * per)
+        } else {
+            Feed::Modal
+        }
     }
 
     /// Queue an arc's chords while the planner has room; its line is
     /// answered with the last.
     fn feed_arc(&mut self) {
-        while let Some((mut pts, from, line)) = self.arc_left.take() {
+        while let Some((mut pts, from, line, feed)) = self.arc_left.take() {
             if self.planner.len() >= PLANNER_BLOCKS {
-                self.arc_left = Some((pts, from, line));
+                self.arc_left = Some((pts, from, line, feed));
                 return;
             }
             let Some(q) = pts.pop_front() else {
                 return self.say("ok");
             };
             if pts.is_empty() {
-                self.queue(from, q, line);
+                self.queue_as(from, q, line, feed);
                 self.say("ok");
                 return;
             }
-            self.queue(from, q, String::new());
-            self.arc_left = Some((pts, q, line));
+            self.queue_as(from, q, String::new(), feed);
+            self.arc_left = Some((pts, q, line, feed));
         }
     }
 

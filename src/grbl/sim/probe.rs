@@ -61,6 +61,18 @@ impl SimGrbl {
         )
     }
 
+    /// A move the machine made, from `from` to `to` (machine
+    /// coordinates), as the tip of the tool in the spindle went.
+    pub(super) fn record_tip(&mut self, from: DVec3, to: DVec3, rapid: bool) {
+        let tip = self.tip();
+        self.tips.push(TipMove {
+            from: from - tip,
+            to: to - tip,
+            rapid,
+            tool: self.tool,
+        });
+    }
+
     /// A probing move from `from` toward `to` at the modal feed: where
     /// the tip meets the plate's top (or, away, leaves it), and where the
     /// machine stops, decelerating from the probe feed past the trigger.
@@ -114,13 +126,7 @@ impl SimGrbl {
     /// or G38.4 met nothing.
     pub(super) fn end_probe(&mut self) {
         let Some(p) = self.probing.take() else { return };
-        let tip = self.tip();
-        self.tips.push(TipMove {
-            from: self.done - tip,
-            to: p.stop - tip,
-            rapid: false,
-            tool: self.tool,
-        });
+        self.record_tip(self.done, p.stop, false);
         self.done = p.stop;
         self.modal.pos = p.stop;
         // GRBL keeps the probe's position only when it touched or was

@@ -15,16 +15,12 @@ host (its two threads spin).
 import argparse
 import json
 import os
-import queue
 import re
-import shutil
-import subprocess
 import sys
-import tempfile
-import threading
 import time
 
 from generate import firmware_dir
+from record_transcripts import Firmware
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -44,51 +40,35 @@ SCENARIOS = [
 STATUS = re.compile(r"<([A-Za-z]+)(?::\d)?\|MPos:(-?[\d.]+),(-?[\d.]+),(-?[\d.]+)")
 
 
-def reader(stream, q):
-    for raw in iter(stream.readline, b""):
-        q.put(raw.decode("latin-1").strip())
-
-
 def record(exe, line, axis, at):
-    run = tempfile.mkdtemp(prefix="hold-")
-    p = subprocess.Popen([exe, "-n", "-s", "/dev/null", "-b", "/dev/null"], cwd=run,
-                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-    q = queue.Queue()
-    threading.Thread(target=reader, args=(p.stdout, q), daemon=True).start()
-
-    def send(b):
-        p.stdin.write(b)
-        p.stdin.flush()
+    fw = Firmware(exe)
 
     def status(timeout=2.0):
         end = time.time() + timeout
         while time.time() < end:
-            try:
-                l = q.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            m = STATUS.match(l)
+            l = fw.line(0.05)
+            m = l and STATUS.match(l.strip())
             if m:
-                return m[1], [float(m[k]) for k in (2, 3, 4)], l
+                return m[1], [float(m[k]) for k in (2, 3, 4)], l.strip()
         return None
 
     try:
         time.sleep(1.5)  # the welcome
-        send(line.encode() + b"\n")
+        fw.send(line + "\n")
         onset = None
         deadline = time.time() + 60
         while time.time() < deadline:
-            send(b"?")
+            fw.send("?")
             st = status()
             if st and (st[1][axis] >= at if at > 0 else st[1][axis] <= at):
-                send(b"!?")
+                fw.send("!?")
                 onset = status()
                 break
             time.sleep(0.02)
         stop = None
         while onset and time.time() < deadline:
             time.sleep(0.1)
-            send(b"?")
+            fw.send("?")
             st = status()
             if st and st[0] == "Hold" and st[2].startswith("<Hold:0"):
                 stop = st
@@ -96,8 +76,7 @@ def record(exe, line, axis, at):
         return {"f": "hold", "in": line, "onset": onset[1], "onset_report": onset[2],
                 "stop": stop[1], "stop_report": stop[2]}
     finally:
-        p.kill()
-        shutil.rmtree(run, ignore_errors=True)
+        fw.close()
 
 
 def main():
